@@ -1,0 +1,132 @@
+"""Per-robot configuration: ``config/<robot>.yaml``.
+
+Everything robot-specific (foot frames, nominal posture, friction, simulator gains, gait
+timings, cost weights) lives in these YAML files, never in code. A config file is looked up
+by robot name in, in order: the ``config`` folder of the source tree, the package's installed
+share folder (``<prefix>/share/horizon_mpc/config``). A path to a YAML file is accepted too.
+
+Schema (every section but ``robot``/``feet`` is optional and falls back to the defaults below)::
+
+    robot: go2                 # example-robot-data name ...
+    urdf_path: null            # ... or an explicit URDF path (takes precedence)
+    base_link: base
+    feet: [FL_foot, FR_foot, RL_foot, RR_foot]   # contact frames, in the order used everywhere
+    nominal_posture: standing  # SRDF group_state giving the nominal joint positions
+    nominal_joints: {}         # per-joint overrides (rad), applied on top of the SRDF posture
+    friction: 0.6              # friction coefficient used by the controller (linearised cone)
+    sim: {kp: 30.0, kd: 1.0, lateral_friction: 0.9, physics_rate: 1000.0}
+    mpc: {...}                 # see horizon_mpc.locomotion (gait, weights, horizon)
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+__all__ = ["RobotConfig", "SimGains", "config_dirs", "load_robot_config"]
+
+
+@dataclass
+class SimGains:
+    """Joint-space PD gains and contact parameters of the simulator."""
+
+    kp: float = 30.0
+    kd: float = 1.0
+    lateral_friction: float = 0.9
+    physics_rate: float = 1000.0
+
+
+@dataclass
+class RobotConfig:
+    """A robot's configuration (see the module docstring for the YAML schema)."""
+
+    name: str
+    robot: str | None
+    urdf_path: str | None
+    base_link: str
+    feet: list[str]
+    nominal_posture: str | None = "standing"
+    nominal_joints: dict[str, float] = field(default_factory=dict)
+    friction: float = 0.6
+    sim: SimGains = field(default_factory=SimGains)
+    sections: dict[str, Any] = field(default_factory=dict)  # other sections, e.g. ``mpc``
+    source: Path | None = None
+
+    def section(self, name: str) -> dict[str, Any]:
+        """A copy of the raw YAML section ``name`` ({} if absent)."""
+        return copy.deepcopy(self.sections.get(name, {}))
+
+
+def config_dirs() -> list[Path]:
+    """Folders searched for ``<robot>.yaml``, in order."""
+    here = Path(__file__).resolve().parent
+    dirs = [here.parent / "config"]
+    dirs.append(Path(sys.prefix) / "share" / "horizon_mpc" / "config")
+    try:  # a colcon/ament install
+        from ament_index_python.packages import get_package_share_directory
+
+        dirs.append(Path(get_package_share_directory("horizon_mpc")) / "config")
+    except Exception:  # noqa: BLE001 - no ament index in this environment: fine
+        pass
+    return dirs
+
+
+def _find_config(name_or_path: str | Path) -> Path:
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml"):
+        if not p.is_file():
+            raise FileNotFoundError(f"robot config file {str(p)!r} does not exist")
+        return p
+    for d in config_dirs():
+        candidate = d / f"{name_or_path}.yaml"
+        if candidate.is_file():
+            return candidate
+    available = sorted({c.stem for d in config_dirs() if d.is_dir() for c in d.glob("*.yaml")})
+    raise FileNotFoundError(
+        f"no config for robot {str(name_or_path)!r}; robot configs available: {', '.join(available)}"
+    )
+
+
+_KNOWN = {"robot", "urdf_path", "base_link", "feet", "nominal_posture", "nominal_joints",
+          "friction", "sim"}
+
+
+def load_robot_config(name_or_path: str | Path) -> RobotConfig:
+    """Load ``config/<name>.yaml`` (or the YAML file at ``name_or_path``).
+
+    Raises:
+        FileNotFoundError: no such config (the message lists the available ones).
+        ValueError: the file is not a mapping or lacks ``feet``/a robot source.
+    """
+    path = _find_config(name_or_path)
+    with open(path, encoding="utf-8") as fh:
+        data = yaml.safe_load(fh)
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a YAML mapping at the top level")
+    if not data.get("robot") and not data.get("urdf_path"):
+        raise ValueError(f"{path}: needs 'robot' (example-robot-data name) or 'urdf_path'")
+    feet = data.get("feet")
+    if not isinstance(feet, list) or not feet:
+        raise ValueError(f"{path}: 'feet' must be a non-empty list of contact frame names")
+    sim = data.get("sim") or {}
+    unknown_sim = set(sim) - set(SimGains.__dataclass_fields__)
+    if unknown_sim:
+        raise ValueError(f"{path}: unknown keys in 'sim': {sorted(unknown_sim)}")
+    return RobotConfig(
+        name=path.stem,
+        robot=data.get("robot"),
+        urdf_path=data.get("urdf_path"),
+        base_link=data.get("base_link", "base"),
+        feet=[str(f) for f in feet],
+        nominal_posture=data.get("nominal_posture", "standing"),
+        nominal_joints={str(k): float(v) for k, v in (data.get("nominal_joints") or {}).items()},
+        friction=float(data.get("friction", 0.6)),
+        sim=SimGains(**{k: float(v) for k, v in sim.items()}),
+        sections={k: v for k, v in data.items() if k not in _KNOWN},
+        source=path,
+    )
