@@ -1,0 +1,93 @@
+"""Nominal postures: SRDF reference configurations and a standing start on flat ground.
+
+Configurations follow Pinocchio's convention, stated once in ``doc/model.md``:
+``q = [base position (3), base quaternion (x, y, z, w), joint positions in model order]``.
+Only numeric Pinocchio is used here (no CasADi), so the simulator can use it too.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from horizon_mpc.config import RobotConfig
+from horizon_mpc.robots import example_robot_files
+
+__all__ = ["load_pin_model", "srdf_joint_values", "standing_configuration"]
+
+
+def _urdf_path(cfg: RobotConfig) -> Path:
+    if cfg.urdf_path:
+        return Path(cfg.urdf_path)
+    return example_robot_files(cfg.robot).urdf
+
+
+def load_pin_model(cfg: RobotConfig, floating_base: bool = True) -> pin.Model:
+    """The numeric Pinocchio model of ``cfg``'s URDF (free-flyer root by default)."""
+    path = _urdf_path(cfg)
+    if not path.is_file():
+        raise FileNotFoundError(f"URDF {str(path)!r} of robot config {cfg.name!r} does not exist")
+    if floating_base:
+        return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+    return pin.buildModelFromUrdf(str(path))
+
+
+def srdf_joint_values(srdf_path: str | Path, state_name: str) -> dict[str, float]:
+    """Joint values of the SRDF ``<group_state name=state_name>``.
+
+    Raises:
+        KeyError: no such group state (the message lists the available ones).
+    """
+    root = ET.parse(str(srdf_path)).getroot()
+    states = root.findall("group_state")
+    for state in states:
+        if state.get("name") == state_name:
+            return {j.get("name"): float(j.get("value").split()[0]) for j in state.findall("joint")}
+    names = sorted({s.get("name") for s in states})
+    raise KeyError(f"no group_state {state_name!r} in {srdf_path}; available: {names}")
+
+
+def _set_joint(model: pin.Model, q: np.ndarray, name: str, value: float) -> None:
+    jid = model.getJointId(name)
+    if jid >= model.njoints:
+        return  # the SRDF may name joints the URDF variant does not have
+    joint = model.joints[jid]
+    if joint.nq == 1:
+        q[joint.idx_q] = value
+    elif joint.nq == 2 and joint.nv == 1:  # continuous joint stored as (cos, sin)
+        q[joint.idx_q : joint.idx_q + 2] = (np.cos(value), np.sin(value))
+
+
+def standing_configuration(
+    cfg: RobotConfig, model: pin.Model | None = None, clearance: float = 0.0
+) -> tuple[pin.Model, np.ndarray]:
+    """The robot standing on flat ground (z = 0) at its nominal posture.
+
+    Joints come from the SRDF group state ``cfg.nominal_posture`` (if the robot ships an
+    SRDF), then ``cfg.nominal_joints`` overrides. The base sits at x = y = 0 with identity
+    orientation, at the height that puts the lowest contact frame of ``cfg.feet`` at
+    ``clearance`` above the ground.
+
+    Returns:
+        ``(model, q)``: the free-flyer Pinocchio model and the configuration, shape (nq,).
+    """
+    model = model if model is not None else load_pin_model(cfg)
+    q = pin.neutral(model)
+    values: dict[str, float] = {}
+    srdf = None if cfg.urdf_path else example_robot_files(cfg.robot).srdf
+    if srdf is not None and cfg.nominal_posture:
+        values.update(srdf_joint_values(srdf, cfg.nominal_posture))
+    values.update(cfg.nominal_joints)
+    for name, value in values.items():
+        _set_joint(model, q, name, value)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    missing = [f for f in cfg.feet if not model.existFrame(f)]
+    if missing:
+        raise KeyError(f"config {cfg.name!r}: unknown foot frames {missing}")
+    lowest = min(data.oMf[model.getFrameId(f)].translation[2] for f in cfg.feet)
+    q[2] = clearance - lowest
+    return model, q
