@@ -1,0 +1,61 @@
+"""Node selections and per-node value arrays.
+
+Nodes are numbered 0..N (``N = n_nodes``, the number of intervals). States live on nodes
+0..N, inputs on 0..N-1. Every ``nodes=`` argument of the Problem API accepts an int, a list,
+a ``range``, a ``slice`` or None (= every node the object lives on).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+
+NodeSelection = int | Iterable[int] | slice | range | None
+
+__all__ = ["NodeSelection", "broadcast_values", "select_nodes"]
+
+
+def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "") -> np.ndarray:
+    """Sorted unique node indices of a selection, validated against ``0..n_valid-1``.
+
+    Raises:
+        IndexError: a node is out of range (the message names ``what`` and the valid range).
+        TypeError: the selection has an unsupported type.
+    """
+    if nodes is None:
+        return np.arange(n_valid)
+    if isinstance(nodes, slice):
+        return np.arange(n_valid)[nodes]
+    if isinstance(nodes, (int, np.integer)):
+        idx = np.array([int(nodes)])
+    else:
+        try:
+            idx = np.array([int(n) for n in nodes], dtype=int)
+        except TypeError as exc:
+            raise TypeError(f"nodes of {what}: expected int, list, range, slice or None, "
+                            f"got {type(nodes).__name__}") from exc
+    if idx.size and (idx.min() < 0 or idx.max() >= n_valid):
+        bad = idx[(idx < 0) | (idx >= n_valid)]
+        raise IndexError(f"nodes {bad.tolist()} out of range for {what}: valid nodes are "
+                         f"0..{n_valid - 1}")
+    return np.unique(idx)
+
+
+def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:
+    """Broadcast a scalar, a (dim,) vector or a (dim, n_sel) array to shape (dim, n_sel).
+
+    Raises:
+        ValueError: the shape fits none of those (the message names ``what``).
+    """
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        return np.full((dim, n_sel), float(arr))
+    if arr.ndim == 1 and arr.shape[0] == dim:
+        return np.repeat(arr[:, None], n_sel, axis=1)
+    if arr.ndim == 2 and arr.shape == (dim, 1):
+        return np.repeat(arr, n_sel, axis=1)
+    if arr.ndim == 2 and arr.shape == (dim, n_sel):
+        return arr.copy()
+    raise ValueError(f"{what}: value of shape {arr.shape} does not fit dimension {dim} on "
+                     f"{n_sel} node(s); give a scalar, ({dim},) or ({dim}, {n_sel})")

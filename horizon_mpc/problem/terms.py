@@ -1,0 +1,164 @@
+"""Constraints and costs: expressions evaluated on a set of nodes.
+
+A term is built from a CasADi expression of the problem's variables. Its *valid* nodes are
+those where every variable it uses exists (a term that uses an input cannot live on node N;
+one that uses ``x.offset(-1)`` cannot live on node 0); its *active* nodes are a subset the
+user chooses and may change between solves without rebuilding anything.
+
+Per-node arrays have shape ``(dim, N + 1)``; columns of nodes where a term is not valid
+are ignored.
+"""
+
+from __future__ import annotations
+
+import casadi as cs
+import numpy as np
+
+from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, select_nodes
+
+__all__ = ["Constraint", "Cost", "GeneralCost", "Term"]
+
+
+class Term:
+    """Common part of constraints and costs.
+
+    Attributes:
+        name: unique name in the problem.
+        expr: the expression (SX column).
+        dim: its number of rows.
+        function: ``casadi.Function`` of the node arguments (see ``Problem.node_inputs``).
+        uses_input: whether the expression depends on the inputs of its node.
+        offsets: sorted node offsets of the offset variables it uses.
+        valid_nodes: nodes where the term can be evaluated.
+    """
+
+    kind = "term"
+
+    def __init__(self, name: str, expr: cs.SX, function: cs.Function, uses_input: bool,
+                 offsets: list[int], valid_nodes: np.ndarray, n_nodes: int,
+                 nodes: NodeSelection):
+        self.name = name
+        self.expr = expr
+        self.dim = int(expr.shape[0])
+        self.function = function
+        self.uses_input = uses_input
+        self.offsets = offsets
+        self.valid_nodes = valid_nodes
+        self.n_nodes = n_nodes
+        self._active = np.zeros(n_nodes + 1, dtype=bool)
+        self.set_nodes(nodes)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r}, dim={self.dim}, nodes={self.nodes.tolist()})"
+
+    def _select(self, nodes: NodeSelection) -> np.ndarray:
+        if nodes is None:
+            return self.valid_nodes.copy()
+        idx = select_nodes(nodes, self.n_nodes + 1, f"{self.kind} {self.name!r}")
+        invalid = np.setdiff1d(idx, self.valid_nodes)
+        if invalid.size:
+            raise IndexError(
+                f"{self.kind} {self.name!r} cannot be evaluated on nodes {invalid.tolist()} "
+                f"(it uses {'inputs or ' if self.uses_input else ''}offset variables); "
+                f"valid nodes: {_ranges(self.valid_nodes)}")
+        return idx
+
+    def set_nodes(self, nodes: NodeSelection) -> None:
+        """Make the term active exactly on ``nodes`` (None: every valid node)."""
+        idx = self._select(nodes)
+        self._active[:] = False
+        self._active[idx] = True
+
+    @property
+    def nodes(self) -> np.ndarray:
+        """The active nodes (sorted)."""
+        return np.flatnonzero(self._active)
+
+    @property
+    def active(self) -> np.ndarray:
+        """Boolean mask of the active nodes, shape (N+1,)."""
+        return self._active.copy()
+
+
+class Constraint(Term):
+    """``lb <= expr <= ub`` on its active nodes (default: ``expr == 0``)."""
+
+    kind = "constraint"
+
+    def __init__(self, *args, bounds=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._lb = np.zeros((self.dim, self.n_nodes + 1))
+        self._ub = np.zeros((self.dim, self.n_nodes + 1))
+        if bounds is not None:
+            self.set_bounds(*bounds)
+
+    def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:
+        """Set the bounds on ``nodes`` (None: all nodes); scalar, (dim,) or (dim, n_sel)."""
+        idx = (np.arange(self.n_nodes + 1) if nodes is None
+               else select_nodes(nodes, self.n_nodes + 1, f"constraint {self.name!r}"))
+        lo = broadcast_values(lb, self.dim, idx.size, f"lower bound of {self.name!r}")
+        hi = broadcast_values(ub, self.dim, idx.size, f"upper bound of {self.name!r}")
+        if np.any(lo > hi):
+            raise ValueError(f"constraint {self.name!r}: lower bound above upper bound")
+        self._lb[:, idx], self._ub[:, idx] = lo, hi
+
+    @property
+    def lower_bounds(self) -> np.ndarray:
+        """Lower bounds, shape (dim, N+1)."""
+        return self._lb.copy()
+
+    @property
+    def upper_bounds(self) -> np.ndarray:
+        """Upper bounds, shape (dim, N+1)."""
+        return self._ub.copy()
+
+    @property
+    def is_equality(self) -> bool:
+        """True when lb == ub on every active node."""
+        a = self._active
+        return bool(np.all(self._lb[:, a] == self._ub[:, a]))
+
+
+class Cost(Term):
+    """Residual cost ``sum_k sum_i w_i r_i(k)^2`` over its active nodes (Gauss-Newton form)."""
+
+    kind = "cost"
+
+    def __init__(self, *args, weight=1.0, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._weight = np.ones(self.dim)
+        self.set_weight(weight)
+
+    def set_weight(self, weight) -> None:
+        """Set the weight: a scalar or one non-negative value per residual row."""
+        w = np.asarray(weight, dtype=float)
+        w = np.full(self.dim, float(w)) if w.ndim == 0 else w.reshape(-1)
+        if w.shape != (self.dim,):
+            raise ValueError(f"weight of cost {self.name!r}: expected a scalar or "
+                             f"{self.dim} values, got shape {np.shape(weight)}")
+        if np.any(w < 0) or not np.all(np.isfinite(w)):
+            raise ValueError(f"weight of cost {self.name!r} must be finite and >= 0")
+        self._weight = w
+
+    @property
+    def weight(self) -> np.ndarray:
+        """Per-row weights, shape (dim,)."""
+        return self._weight.copy()
+
+
+class GeneralCost(Term):
+    """A general scalar cost ``sum_k l(k)`` (only for solvers that take a Hessian: IPOPT)."""
+
+    kind = "general cost"
+
+
+def _ranges(idx: np.ndarray) -> str:
+    if idx.size == 0:
+        return "none"
+    parts, start = [], idx[0]
+    for a, b in zip(idx[:-1], idx[1:], strict=True):
+        if b != a + 1:
+            parts.append(f"{start}..{a}" if a != start else f"{start}")
+            start = b
+    parts.append(f"{start}..{idx[-1]}" if idx[-1] != start else f"{start}")
+    return ", ".join(parts)

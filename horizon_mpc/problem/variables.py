@@ -1,0 +1,207 @@
+"""Decision variables and parameters of a :class:`~horizon_mpc.problem.Problem`.
+
+A variable *is* a CasADi ``SX`` column symbol, so it composes into expressions directly
+(``q[7:] - q_nominal``); it also carries per-node bounds, an initial guess (warm start)
+and, for states, an optional manifold (e.g. a configuration with a quaternion).
+
+Arrays of per-node values have shape ``(dim, n)`` with ``n = N + 1`` for states and
+parameters, ``N`` for inputs and 1 for single variables.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as cs
+import numpy as np
+
+from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, select_nodes
+
+__all__ = [
+    "InputVariable",
+    "Manifold",
+    "OffsetVariable",
+    "Parameter",
+    "SingleVariable",
+    "StateVariable",
+    "Variable",
+]
+
+
+@dataclass(frozen=True)
+class Manifold:
+    """A state variable's configuration space: ``integrate(x, dx)`` and ``difference(x0, x1)``.
+
+    ``integrate`` maps (x (dim), dx (tangent_dim)) -> x; ``difference`` maps
+    (x0, x1) -> dx such that ``integrate(x0, difference(x0, x1)) == x1``.
+    """
+
+    integrate: cs.Function
+    difference: cs.Function
+    tangent_dim: int
+
+
+class Variable(cs.SX):
+    """Base of all variables: an SX symbol with per-node values.
+
+    Attributes:
+        name: the variable's name (unique in its problem).
+        dim: its dimension.
+        kind: 'state', 'input', 'single' or 'parameter'.
+    """
+
+    kind = "variable"
+
+    def __init__(self, name: str, dim: int, n_values: int):
+        super().__init__(cs.SX.sym(name, dim))
+        self.name = name
+        self.dim = dim
+        self.n_values = n_values
+        self._lb = np.full((dim, n_values), -np.inf)
+        self._ub = np.full((dim, n_values), np.inf)
+        self._init = np.zeros((dim, n_values))
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r}, dim={self.dim})"
+
+    def _nodes(self, nodes: NodeSelection) -> np.ndarray:
+        return select_nodes(nodes, self.n_values, f"{self.kind} variable {self.name!r}")
+
+    def _values(self, value, idx: np.ndarray, what: str) -> np.ndarray:
+        return broadcast_values(value, self.dim, idx.size, f"{what} of {self.name!r}")
+
+    def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:
+        """Set lower and upper bounds on ``nodes`` (scalar, (dim,) or (dim, n_sel))."""
+        idx = self._nodes(nodes)
+        lo, hi = self._values(lb, idx, "lower bound"), self._values(ub, idx, "upper bound")
+        if np.any(lo > hi):
+            raise ValueError(f"bounds of {self.name!r}: lower bound above upper bound")
+        self._lb[:, idx], self._ub[:, idx] = lo, hi
+
+    def set_lower_bounds(self, lb, nodes: NodeSelection = None) -> None:
+        """Set the lower bounds only."""
+        idx = self._nodes(nodes)
+        self._lb[:, idx] = self._values(lb, idx, "lower bound")
+
+    def set_upper_bounds(self, ub, nodes: NodeSelection = None) -> None:
+        """Set the upper bounds only."""
+        idx = self._nodes(nodes)
+        self._ub[:, idx] = self._values(ub, idx, "upper bound")
+
+    def set_initial_guess(self, value, nodes: NodeSelection = None) -> None:
+        """Set the initial guess (warm start) on ``nodes``."""
+        idx = self._nodes(nodes)
+        self._init[:, idx] = self._values(value, idx, "initial guess")
+
+    @property
+    def lower_bounds(self) -> np.ndarray:
+        """Lower bounds, shape (dim, n_values) (a copy)."""
+        return self._lb.copy()
+
+    @property
+    def upper_bounds(self) -> np.ndarray:
+        """Upper bounds, shape (dim, n_values) (a copy)."""
+        return self._ub.copy()
+
+    @property
+    def initial_guess(self) -> np.ndarray:
+        """Initial guess, shape (dim, n_values) (a copy)."""
+        return self._init.copy()
+
+    def shift(self) -> None:
+        """Shift the initial guess one node back (receding horizon); the last node repeats."""
+        if self.n_values > 1:
+            self._init[:, :-1] = self._init[:, 1:]
+
+
+class OffsetVariable(cs.SX):
+    """The value of a state/input variable at node ``k + offset`` (for rate terms)."""
+
+    def __init__(self, parent: Variable, offset: int):
+        super().__init__(cs.SX.sym(f"{parent.name}_{'m' if offset < 0 else 'p'}{abs(offset)}",
+                                   parent.dim))
+        self.parent = parent
+        self.offset = offset
+        self.name = f"{parent.name}.offset({offset})"
+        self.dim = parent.dim
+
+
+class _NodeVariable(Variable):
+    def __init__(self, name: str, dim: int, n_values: int):
+        super().__init__(name, dim, n_values)
+        self._offsets: dict[int, OffsetVariable] = {}
+
+    def offset(self, k: int) -> OffsetVariable:
+        """The variable at node ``i + k`` when a term is evaluated at node ``i``."""
+        if not isinstance(k, (int, np.integer)) or k == 0:
+            raise ValueError(f"offset of {self.name!r} must be a non-zero int, got {k!r}")
+        k = int(k)
+        if k not in self._offsets:
+            self._offsets[k] = OffsetVariable(self, k)
+        return self._offsets[k]
+
+
+class StateVariable(_NodeVariable):
+    """A state: one value per node 0..N."""
+
+    kind = "state"
+
+    def __init__(self, name: str, dim: int, n_nodes: int):
+        super().__init__(name, dim, n_nodes + 1)
+        self.manifold: Manifold | None = None
+
+    @property
+    def tangent_dim(self) -> int:
+        """Dimension of the tangent space (``dim`` unless on a manifold)."""
+        return self.manifold.tangent_dim if self.manifold else self.dim
+
+    def set_manifold(self, integrate: cs.Function, difference: cs.Function,
+                     tangent_dim: int) -> None:
+        """Declare that this state lives on a manifold (see :class:`Manifold`)."""
+        if integrate.size1_in(0) != self.dim or integrate.size1_in(1) != tangent_dim:
+            raise ValueError(f"manifold of {self.name!r}: integrate must map "
+                             f"({self.dim}, {tangent_dim}) -> {self.dim}")
+        self.manifold = Manifold(integrate, difference, int(tangent_dim))
+
+
+class InputVariable(_NodeVariable):
+    """An input (control): one value per interval, nodes 0..N-1."""
+
+    kind = "input"
+
+    def __init__(self, name: str, dim: int, n_nodes: int):
+        super().__init__(name, dim, n_nodes)
+
+
+class SingleVariable(Variable):
+    """A variable with one value for the whole horizon (e.g. a duration)."""
+
+    kind = "single"
+
+    def __init__(self, name: str, dim: int):
+        super().__init__(name, dim, 1)
+
+    def _nodes(self, nodes: NodeSelection) -> np.ndarray:
+        return np.array([0])
+
+
+class Parameter(Variable):
+    """A value that is not optimised, one value per node 0..N; change it between solves."""
+
+    kind = "parameter"
+
+    def __init__(self, name: str, dim: int, n_nodes: int):
+        super().__init__(name, dim, n_nodes + 1)
+
+    def assign(self, value, nodes: NodeSelection = None) -> None:
+        """Assign the parameter's value on ``nodes`` (scalar, (dim,) or (dim, n_sel))."""
+        idx = self._nodes(nodes)
+        self._init[:, idx] = self._values(value, idx, "value")
+
+    @property
+    def values(self) -> np.ndarray:
+        """The assigned values, shape (dim, N+1) (a copy)."""
+        return self._init.copy()
+
+    def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:  # noqa: D102
+        raise TypeError(f"parameter {self.name!r} has no bounds: use assign()")

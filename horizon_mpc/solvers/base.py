@@ -1,0 +1,114 @@
+"""The interface every solver implements (``make_solver(name, prb, opts)``).
+
+Life cycle::
+
+    solver = make_solver('ipopt', prb, {'max_iter': 100})
+    ok = solver.solve()                 # starts from the variables' initial guesses
+    solver.solution['q']                # (dim, N+1) for states, (dim, N) for inputs
+    solver.stats                        # see SolverStats
+    solver.shift()                      # receding horizon: shift guesses (and multipliers)
+    ok = solver.solve()                 # warm re-solve, nothing rebuilt
+
+After every solve the solution is written back into the variables' initial guesses
+(option ``warm_start``, default True), so ``shift()`` + ``solve()`` is a warm start.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from horizon_mpc.problem import Problem
+
+__all__ = ["Solver", "SolverStats"]
+
+
+@dataclass
+class SolverStats:
+    """What a solve did. ``constraint_violation`` is the max over dynamics defects,
+    constraints and variable bounds (inf-norm)."""
+
+    success: bool = False
+    status: str = "not solved"
+    iterations: int = 0
+    time: float = 0.0
+    cost: float = math.nan
+    constraint_violation: float = math.nan
+    history: list[dict[str, float]] = field(default_factory=list)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __getitem__(self, key: str) -> Any:  # dict-style access: stats['iterations']
+        return asdict(self)[key] if key != "extra" else self.extra
+
+    def as_dict(self) -> dict[str, Any]:
+        """A JSON-friendly dict."""
+        d = asdict(self)
+        d.update(d.pop("extra"))
+        return d
+
+
+class Solver:
+    """Base class: holds the problem, options and the last solution.
+
+    Subclasses implement :meth:`_solve` and declare ``DEFAULTS`` (option name -> default).
+    Unknown option names raise ``ValueError`` listing the known ones.
+    """
+
+    name = "solver"
+    DEFAULTS: dict[str, Any] = {}
+    COMMON = {"warm_start": True, "verbose": False}
+
+    def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
+        self.prb = prb
+        self.opts = self._merge_options(opts or {})
+        prb.finalize()
+        self.solution: dict[str, np.ndarray] = {}
+        self.stats = SolverStats()
+
+    def _merge_options(self, opts: dict[str, Any]) -> dict[str, Any]:
+        known = {**self.COMMON, **self.DEFAULTS}
+        unknown = set(opts) - set(known) - set(self._passthrough_keys(opts))
+        if unknown:
+            raise ValueError(f"unknown option(s) {sorted(unknown)} for solver {self.name!r}; "
+                             f"options are: {sorted(known)}")
+        return {**known, **opts}
+
+    def _passthrough_keys(self, opts: dict[str, Any]) -> list[str]:
+        """Option keys handed to a backend unchecked (e.g. ``ipopt.*``)."""
+        return []
+
+    def set_option(self, key: str, value: Any) -> None:
+        """Change one option between solves."""
+        self.opts.update(self._merge_options({key: value}))
+
+    def solve(self) -> bool:
+        """Solve from the current initial guesses; returns success."""
+        ok = self._solve()
+        if self.solution and self.opts["warm_start"]:
+            self._write_back()
+        return ok
+
+    def _solve(self) -> bool:
+        raise NotImplementedError
+
+    def shift(self) -> None:
+        """Receding horizon: shift the problem's guesses/parameters and solver state."""
+        self.prb.shift()
+
+    def _write_back(self) -> None:
+        for name, var in self.prb.variables.items():
+            if var.kind != "parameter" and name in self.solution:
+                var.set_initial_guess(self.solution[name])
+
+    def _split_solution(self, X: np.ndarray, U: np.ndarray, S: np.ndarray) -> None:
+        """Fill ``self.solution`` from stacked arrays X (nx, N+1), U (nu, N), S (ns, 1)."""
+        sol: dict[str, np.ndarray] = {"x": X, "u": U}
+        for group, arr in ((self.prb.states, X), (self.prb.inputs, U), (self.prb.singles, S)):
+            i = 0
+            for v in group:
+                sol[v.name] = arr[i:i + v.dim].copy()
+                i += v.dim
+        self.solution = sol
