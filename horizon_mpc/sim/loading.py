@@ -1,0 +1,214 @@
+"""Loading a URDF into pybullet with the same physics as Pinocchio reads from it.
+
+Three things differ between pybullet's URDF importer and Pinocchio's, and are corrected here:
+
+* ``package://`` mesh URIs: rewritten to absolute paths (package folders are looked up in the
+  given search folders, the ament prefixes, example-robot-data's share folder and the URDF's
+  ancestors), so loading does not depend on pybullet's single global search path.
+* Links without ``<inertial>``: pybullet gives them 1 kg and unit inertia (Pinocchio: 0 kg).
+  They get :data:`MASSLESS_LINK_MASS` instead. (Not exactly 0: a zero-mass root link would
+  make pybullet treat the robot as fixed-base.)
+* Inertia: taken from the file (``URDF_USE_INERTIA_FROM_FILE``), not recomputed from the
+  collision shapes; pybullet's default per-link linear/angular velocity damping is removed.
+
+Joint damping from ``<dynamics damping>`` is applied by pybullet itself; joint friction is
+realised with pybullet's joint velocity motor (target velocity 0, max force = friction), which
+is pybullet's implicit Coulomb friction. All other motors are disabled (force 0).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet as p
+
+__all__ = ["MASSLESS_LINK_MASS", "LoadedRobot", "load_robot", "resolve_mesh_uris"]
+
+_LOG = logging.getLogger(__name__)
+
+MASSLESS_LINK_MASS = 1e-5  # kg, given to links that have no <inertial> (Pinocchio: 0 kg)
+_MASSLESS_LINK_INERTIA = 1e-9  # kg m^2, principal moments of those links
+
+_FILENAME = re.compile(r'filename\s*=\s*"([^"]*)"')
+
+
+@dataclass
+class LoadedRobot:
+    """A robot loaded in one pybullet physics client.
+
+    Attributes:
+        body: pybullet body unique id.
+        root_link: name of the URDF root link (pybullet link index -1).
+        link_index: URDF link name -> pybullet link index (root link -> -1).
+        joint_index: name of each non-fixed joint -> pybullet joint index.
+        parent_index: pybullet link index -> index of its parent link (-1 for the root).
+        fixed_joint: pybullet link index -> whether the joint above the link is fixed.
+        massless_links: links that had no ``<inertial>`` and were given a tiny mass.
+        inertial_pos: (3,) root link's inertial frame origin in the root link frame (m).
+        inertial_quat: (4,) its orientation ``(x, y, z, w)`` (principal axes, as pybullet uses).
+    """
+
+    body: int
+    root_link: str
+    link_index: dict[str, int]
+    joint_index: dict[str, int]
+    parent_index: dict[int, int]
+    fixed_joint: dict[int, bool]
+    massless_links: list[str]
+    inertial_pos: np.ndarray
+    inertial_quat: np.ndarray
+
+    def rigid_group(self, link: str) -> set[int]:
+        """pybullet indices of the links rigidly attached to ``link`` or moving with it.
+
+        That is the subtree below the nearest non-fixed joint above ``link`` (for a foot
+        frame on a fixed joint: the calf/ankle link, the foot link, a wheel on the ankle, ...).
+        Used to attribute contact points to feet.
+        """
+        idx = self.link_index[link]
+        while idx != -1 and self.fixed_joint[idx]:
+            idx = self.parent_index[idx]
+        group = {idx}
+        changed = True
+        while changed:
+            changed = False
+            for child, parent in self.parent_index.items():
+                if parent in group and child not in group:
+                    group.add(child)
+                    changed = True
+        return group
+
+
+def _package_roots(urdf: Path, search_dirs: list[Path]) -> list[Path]:
+    roots = list(search_dirs)
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        if prefix:
+            roots.append(Path(prefix) / "share")
+    try:
+        from horizon_mpc.robots import example_robots_dir
+
+        roots.append(example_robots_dir().parent.parent)
+    except FileNotFoundError:
+        pass
+    roots.extend(urdf.resolve().parents)
+    return roots
+
+
+def _resolve(uri: str, urdf: Path, roots: list[Path]) -> str | None:
+    if uri.startswith("file://"):
+        return uri[len("file://"):]
+    if not uri.startswith("package://"):
+        path = Path(uri)
+        return str(path if path.is_absolute() else (urdf.resolve().parent / path))
+    package, _, rest = uri[len("package://"):].partition("/")
+    for root in roots:
+        for candidate in (root / package / rest, root / rest if root.name == package else None):
+            if candidate is not None and candidate.is_file():
+                return str(candidate)
+    return None
+
+
+def resolve_mesh_uris(urdf: Path, search_dirs: list[Path] | None = None) -> str:
+    """The URDF text of ``urdf`` with every ``filename="..."`` made an absolute path.
+
+    Unresolvable URIs are left as they are (pybullet then skips that mesh) and logged.
+    """
+    text = urdf.read_text(encoding="utf-8")
+    roots = _package_roots(urdf, [Path(d) for d in (search_dirs or [])])
+    cache: dict[str, str] = {}
+
+    def substitute(match: re.Match[str]) -> str:
+        uri = match.group(1)
+        if uri not in cache:
+            resolved = _resolve(uri, urdf, roots)
+            if resolved is None:
+                _LOG.warning("%s: cannot resolve mesh %r; the mesh is skipped", urdf, uri)
+                resolved = uri
+            cache[uri] = resolved
+        return f'filename="{cache[uri]}"'
+
+    return _FILENAME.sub(substitute, text)
+
+
+def _links_without_inertial(urdf_text: str) -> set[str]:
+    root = ET.fromstring(urdf_text)
+    return {link.get("name") for link in root.findall("link") if link.find("inertial") is None}
+
+
+def load_robot(
+    client: int,
+    urdf: Path,
+    search_dirs: list[Path] | None = None,
+    lateral_friction: float = 0.9,
+) -> LoadedRobot:
+    """Load ``urdf`` into the pybullet client ``client`` with the corrections listed above.
+
+    Args:
+        client: pybullet physics client id.
+        urdf: URDF file.
+        search_dirs: extra folders holding ROS packages (for ``package://`` URIs).
+        lateral_friction: friction coefficient of every robot link (the ground's is 1, and
+            pybullet multiplies the two).
+    """
+    text = resolve_mesh_uris(urdf, search_dirs)
+    with tempfile.TemporaryDirectory(prefix="horizon_mpc_urdf_") as tmp:
+        path = Path(tmp) / urdf.name
+        path.write_text(text, encoding="utf-8")
+        body = p.loadURDF(
+            str(path),
+            flags=p.URDF_USE_INERTIA_FROM_FILE,
+            useFixedBase=False,
+            physicsClientId=client,
+        )
+    if body < 0:
+        raise RuntimeError(f"pybullet could not load the URDF {urdf}")
+    root_link = p.getBodyInfo(body, physicsClientId=client)[0].decode()
+    link_index = {root_link: -1}
+    joint_index: dict[str, int] = {}
+    parent_index: dict[int, int] = {}
+    fixed_joint: dict[int, bool] = {}
+    for j in range(p.getNumJoints(body, physicsClientId=client)):
+        info = p.getJointInfo(body, j, physicsClientId=client)
+        link_index[info[12].decode()] = j
+        parent_index[j] = info[16]
+        fixed_joint[j] = info[2] == p.JOINT_FIXED
+        if not fixed_joint[j]:
+            joint_index[info[1].decode()] = j
+    massless = sorted(_links_without_inertial(text) & set(link_index))
+    for name in massless:
+        p.changeDynamics(
+            body,
+            link_index[name],
+            mass=MASSLESS_LINK_MASS,
+            localInertiaDiagonal=[_MASSLESS_LINK_INERTIA] * 3,
+            physicsClientId=client,
+        )
+    if massless:
+        _LOG.info("%s: links without <inertial> given %g kg: %s", urdf.name, MASSLESS_LINK_MASS,
+                  ", ".join(massless))
+    for idx in link_index.values():
+        p.changeDynamics(body, idx, linearDamping=0.0, angularDamping=0.0,
+                         lateralFriction=lateral_friction, physicsClientId=client)
+    for j in joint_index.values():
+        friction = p.getJointInfo(body, j, physicsClientId=client)[7]
+        p.setJointMotorControl2(body, j, p.VELOCITY_CONTROL, targetVelocity=0.0,
+                                force=max(float(friction), 0.0), physicsClientId=client)
+    dyn = p.getDynamicsInfo(body, -1, physicsClientId=client)
+    return LoadedRobot(
+        body=body,
+        root_link=root_link,
+        link_index=link_index,
+        joint_index=joint_index,
+        parent_index=parent_index,
+        fixed_joint=fixed_joint,
+        massless_links=massless,
+        inertial_pos=np.array(dyn[3], dtype=float),
+        inertial_quat=np.array(dyn[4], dtype=float),
+    )

@@ -1,0 +1,234 @@
+"""Joint trajectory commands: validation, and the reference they define at each physics step.
+
+A :class:`JointTrajectoryCommand` is the library form of a ``trajectory_msgs/JointTrajectory``:
+K points at times ``t0 + times[k]`` (sim seconds) with joint positions (rad or m), optional
+velocities and optional efforts (N m or N). :class:`ReferenceGenerator` turns the latest
+command into ``(q_ref, v_ref, tau_ff)`` at any time:
+
+* between points: cubic Hermite on positions when velocities are given (``v_ref`` is its
+  time derivative, so position and velocity references agree), linear otherwise; efforts
+  linear;
+* before the first point (its time is later than the moment the command was set): the
+  reference at that moment is prepended, so the robot moves smoothly onto the trajectory;
+* after the last point, or once the command is older than ``timeout`` (the sender died): hold
+  the reference reached, with ``v_ref = 0`` (the D term damps) and its feed-forward torque.
+  The robot is never let go.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["JointTrajectoryCommand", "ReferenceGenerator"]
+
+
+def _finite_array(name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} is not a numeric array of shape {shape}: {exc}") from None
+    if arr.shape != shape:
+        raise ValueError(f"{name} has shape {arr.shape}, expected {shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        raise ValueError(f"{name} contains NaN/Inf (first at index {tuple(int(i) for i in bad)})")
+    return arr
+
+
+@dataclass
+class JointTrajectoryCommand:
+    """A joint trajectory: K points for nj named joints.
+
+    Attributes:
+        joint_names: (nj,) joint names; column j of the arrays belongs to ``joint_names[j]``.
+        t0: stamp (sim s) that ``times`` count from.
+        times: (K,) strictly increasing, >= 0 (s).
+        positions: (K, nj) joint positions (rad / m).
+        velocities: (K, nj) joint velocities (rad/s / m/s), or None.
+        efforts: (K, nj) feed-forward efforts (N m / N), or None (zero feed-forward).
+    """
+
+    joint_names: Sequence[str]
+    t0: float
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+    efforts: np.ndarray | None = None
+
+    def validate(
+        self,
+        expected_joints: Sequence[str] | None = None,
+        now: float | None = None,
+        max_stamp_offset: float = 1.0,
+    ) -> JointTrajectoryCommand:
+        """Check the command; return a copy with float arrays of the documented shapes.
+
+        Args:
+            expected_joints: if given, ``joint_names`` must be exactly these (any order).
+            now: current sim time (s); if given, ``|t0 - now|`` must be ``<= max_stamp_offset``.
+            max_stamp_offset: accepted stamp age / lead (s).
+
+        Raises:
+            ValueError: with a message naming the problem.
+        """
+        names = list(self.joint_names)
+        if not names:
+            raise ValueError("joint_names is empty")
+        if not all(isinstance(n, str) for n in names):
+            raise ValueError("joint_names must be strings")
+        if len(set(names)) != len(names):
+            dup = sorted({n for n in names if names.count(n) > 1})
+            raise ValueError(f"duplicate joint names: {dup}")
+        if expected_joints is not None:
+            expected = set(expected_joints)
+            unknown = [n for n in names if n not in expected]
+            if unknown:
+                raise ValueError(
+                    f"unknown joint names {unknown}; the joints are: {list(expected_joints)}"
+                )
+            missing = [n for n in expected_joints if n not in set(names)]
+            if missing:
+                raise ValueError(f"missing joint names {missing} (every joint must be commanded)")
+        try:
+            t0 = float(self.t0)
+        except (TypeError, ValueError):
+            raise ValueError(f"t0 is not a number: {self.t0!r}") from None
+        if not math.isfinite(t0):
+            raise ValueError(f"t0 is not finite: {t0}")
+        try:
+            k = len(self.times)  # type: ignore[arg-type]
+        except TypeError:
+            raise ValueError("times is not a sequence") from None
+        if k == 0:
+            raise ValueError("the trajectory has no points")
+        times = _finite_array("times", self.times, (k,))
+        if times[0] < 0.0:
+            raise ValueError(f"times[0] = {times[0]} is negative")
+        steps = np.diff(times)
+        if np.any(steps <= 0.0):
+            i = int(np.argmax(steps <= 0.0))
+            raise ValueError(
+                f"times are not strictly increasing: times[{i}] = {times[i]}, "
+                f"times[{i + 1}] = {times[i + 1]}"
+            )
+        shape = (k, len(names))
+        positions = _finite_array("positions", self.positions, shape)
+        velocities = None
+        if self.velocities is not None:
+            velocities = _finite_array("velocities", self.velocities, shape)
+        efforts = None
+        if self.efforts is not None:
+            efforts = _finite_array("efforts", self.efforts, shape)
+        if now is not None:
+            if t0 - now > max_stamp_offset:
+                raise ValueError(
+                    f"stamp {t0:.6f} s is {t0 - now:.3f} s in the future (now {now:.6f} s, "
+                    f"accepted: {max_stamp_offset} s)"
+                )
+            if now - t0 > max_stamp_offset:
+                raise ValueError(
+                    f"stamp {t0:.6f} s is {now - t0:.3f} s old (now {now:.6f} s, "
+                    f"accepted: {max_stamp_offset} s)"
+                )
+        return JointTrajectoryCommand(names, t0, times, positions, velocities, efforts)
+
+    def reordered(self, joint_names: Sequence[str]) -> JointTrajectoryCommand:
+        """The same command with columns in the order of ``joint_names`` (a permutation)."""
+        col = {n: j for j, n in enumerate(self.joint_names)}
+        idx = [col[n] for n in joint_names]
+
+        def pick(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else np.asarray(a, dtype=float)[:, idx]
+
+        return JointTrajectoryCommand(
+            list(joint_names), self.t0, np.asarray(self.times, dtype=float),
+            pick(self.positions), pick(self.velocities), pick(self.efforts),
+        )
+
+
+class ReferenceGenerator:
+    """The joint reference ``(q_ref, v_ref, tau_ff)`` defined by the latest command.
+
+    Arrays are (nj,) in the simulator's joint order. :meth:`reference` is called every physics
+    step; it allocates a few small arrays and nothing else.
+    """
+
+    def __init__(self, n_joints: int, timeout: float = 0.5) -> None:
+        """Args: n_joints: nj; timeout: age (s, since :meth:`set_command`) of a stale command."""
+        self.n_joints = n_joints
+        self.timeout = timeout
+        zeros = np.zeros(n_joints)
+        self._hold = (zeros.copy(), zeros.copy(), zeros.copy())
+        self._times: np.ndarray | None = None  # (K,) absolute sim times
+        self._q = self._v = self._tau = zeros  # (K, nj) each once a command is set
+        self._has_v = False
+        self._received = 0.0
+
+    @property
+    def holding(self) -> bool:
+        """True when no trajectory is being followed (holding a posture)."""
+        return self._times is None
+
+    def hold(self, q: np.ndarray, tau_ff: np.ndarray) -> None:
+        """Drop any trajectory; hold joint positions ``q`` (nj,) with feed-forward ``tau_ff``."""
+        self._times = None
+        self._hold = (np.array(q, dtype=float), np.zeros(self.n_joints),
+                      np.array(tau_ff, dtype=float))
+
+    def set_command(self, cmd: JointTrajectoryCommand, now: float) -> None:
+        """Follow ``cmd`` (validated, columns in simulator joint order) from sim time ``now``."""
+        times = cmd.t0 + np.asarray(cmd.times, dtype=float)
+        k, nj = cmd.positions.shape
+        q = np.asarray(cmd.positions, dtype=float)
+        has_v = cmd.velocities is not None
+        v = np.asarray(cmd.velocities, dtype=float) if has_v else np.zeros((k, nj))
+        tau = np.asarray(cmd.efforts, dtype=float) if cmd.efforts is not None else np.zeros((k, nj))
+        if times[0] > now:  # start from where the reference is now
+            q_now, v_now, tau_now = self.reference(now)
+            times = np.concatenate(([now], times))
+            q = np.vstack((q_now, q))
+            v = np.vstack((v_now, v))
+            tau = np.vstack((tau_now, tau))
+        self._times, self._q, self._v, self._tau = times, q, v, tau
+        self._has_v = has_v
+        self._received = now
+
+    def reference(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(q_ref, v_ref, tau_ff)`` at sim time ``t`` (s), each (nj,). Do not modify them."""
+        times = self._times
+        if times is None:
+            return self._hold
+        if t - self._received > self.timeout:  # stale: freeze where the reference was
+            q, _, tau = self._interpolate(times, min(self._received + self.timeout, times[-1]))
+            self.hold(q, tau)
+            return self._hold
+        if t >= times[-1]:  # ran out: hold the last point
+            self.hold(self._q[-1], self._tau[-1])
+            return self._hold
+        return self._interpolate(times, t)
+
+    def _interpolate(
+        self, times: np.ndarray, t: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if t <= times[0]:
+            return self._q[0], self._v[0], self._tau[0]
+        if t >= times[-1]:
+            return self._q[-1], self._v[-1], self._tau[-1]
+        i = int(np.searchsorted(times, t, side="right")) - 1
+        h = times[i + 1] - times[i]
+        s = (t - times[i]) / h
+        q0, q1 = self._q[i], self._q[i + 1]
+        tau = self._tau[i] + s * (self._tau[i + 1] - self._tau[i])
+        if not self._has_v:
+            return q0 + s * (q1 - q0), (q1 - q0) / h, tau
+        m0, m1 = h * self._v[i], h * self._v[i + 1]
+        s2, s3 = s * s, s * s * s
+        q = ((2 * s3 - 3 * s2 + 1) * q0 + (s3 - 2 * s2 + s) * m0
+             + (3 * s2 - 2 * s3) * q1 + (s3 - s2) * m1)
+        v = ((6 * s2 - 6 * s) * q0 + (3 * s2 - 4 * s + 1) * m0
+             + (6 * s - 6 * s2) * q1 + (3 * s2 - 2 * s) * m1) / h
+        return q, v, tau
