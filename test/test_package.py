@@ -1,0 +1,404 @@
+"""The package foundation: what `ros2 run`, colcon, pip and the Makefile rely on.
+
+The ament tests inspect the interpreter running pytest: ``make setup`` installs horizon_mpc
+into ``.venv`` (editable) and copies the data files (ament index marker, package.xml,
+configs, launchers) into the venv prefix. The install tests build from a copy of the source
+tree into temporary prefixes, offline.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.metadata
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from xml.etree import ElementTree
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = "horizon_mpc"
+SOURCE_ITEMS = ["setup.py", "setup.cfg", "pyproject.toml", "package.xml", "Makefile",
+                "resource", "scripts", "config", "launch", PACKAGE]
+
+
+def _setup_py_constant(name: str):
+    """The literal value assigned to ``name`` at the top level of setup.py (not executed)."""
+    tree = ast.parse((ROOT / "setup.py").read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == name for t in node.targets
+        ):
+            return ast.literal_eval(node.value)
+    raise AssertionError(f"setup.py assigns no literal {name}")
+
+
+EXECUTABLES: dict[str, str] = _setup_py_constant("EXECUTABLES")
+
+
+def _copy_source(dest: Path) -> Path:
+    """Copy the files a build needs into ``dest`` (builds write build/ and egg-info there)."""
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info")
+    dest.mkdir(parents=True)
+    for item in SOURCE_ITEMS:
+        src = ROOT / item
+        if src.is_dir():
+            shutil.copytree(src, dest / item, ignore=ignore)
+        else:
+            shutil.copy2(src, dest / item)
+    return dest
+
+
+def _get_package_prefix(prefixes: list[str]) -> Path:
+    from ament_index_python.packages import get_package_prefix
+
+    old = os.environ.get("AMENT_PREFIX_PATH")
+    os.environ["AMENT_PREFIX_PATH"] = os.pathsep.join(prefixes)
+    try:
+        return Path(get_package_prefix(PACKAGE))
+    finally:
+        if old is None:
+            del os.environ["AMENT_PREFIX_PATH"]
+        else:
+            os.environ["AMENT_PREFIX_PATH"] = old
+
+
+# --------------------------------------------------------------------------------------------
+# The library stays ROS-free
+
+_IMPORT_PROBE = """
+import importlib, json, pkgutil, sys
+
+EXCLUDED = ("horizon_mpc.nodes", "horizon_mpc.closed_loop")  # these bring ROS in on purpose
+report = {"imported": [], "errors": {}, "rclpy_first_seen_after": None}
+
+
+def visit(name):
+    try:
+        module = importlib.import_module(name)
+    except Exception as exc:  # report every broken module, keep walking
+        report["errors"][name] = f"{type(exc).__name__}: {exc}"
+        return
+    report["imported"].append(name)
+    if "rclpy" in sys.modules and report["rclpy_first_seen_after"] is None:
+        report["rclpy_first_seen_after"] = name
+    for info in pkgutil.iter_modules(getattr(module, "__path__", []), name + "."):
+        if not any(info.name == e or info.name.startswith(e + ".") for e in EXCLUDED):
+            visit(info.name)
+
+
+visit("horizon_mpc")
+with open(sys.argv[1], "w") as fh:
+    json.dump(report, fh)
+"""
+
+
+@pytest.fixture(scope="module")
+def import_report(tmp_path_factory) -> dict:
+    """Import every library module in a fresh interpreter and report what happened."""
+    out = tmp_path_factory.mktemp("imports") / "report.json"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
+    proc = subprocess.run([sys.executable, "-c", _IMPORT_PROBE, str(out)], env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(out.read_text())
+
+
+def test_walk_covers_the_library_modules(import_report):
+    imported = set(import_report["imported"]) | set(import_report["errors"])
+    assert {"horizon_mpc", "horizon_mpc.config", "horizon_mpc.robots"} <= imported
+    assert not any(name.startswith("horizon_mpc.nodes") for name in imported)
+
+
+def test_every_library_module_imports(import_report):
+    assert import_report["errors"] == {}
+
+
+def test_importing_the_library_does_not_import_rclpy(import_report):
+    culprit = import_report["rclpy_first_seen_after"]
+    assert culprit is None, f"rclpy was imported while importing {culprit}"
+
+
+# --------------------------------------------------------------------------------------------
+# Executables: one dict in setup.py, one launcher file each
+
+def test_scripts_folder_holds_exactly_one_launcher_per_executable():
+    assert sorted(p.name for p in (ROOT / "scripts").iterdir()) == sorted(EXECUTABLES)
+
+
+@pytest.mark.parametrize("exe", sorted(EXECUTABLES))
+def test_launcher_imports_and_calls_the_declared_main(exe):
+    script = ROOT / "scripts" / exe
+    text = script.read_text(encoding="utf-8")
+    module, func = EXECUTABLES[exe].split(":")
+    assert text.startswith("#!/usr/bin/env python3\n")
+    imports = [(n.module, [a.name for a in n.names])
+               for n in ast.walk(ast.parse(text)) if isinstance(n, ast.ImportFrom)]
+    assert imports == [(module, [func])]
+    assert f"sys.exit({func}())" in text  # the exit code of main() is the process's
+
+
+@pytest.mark.parametrize("exe", sorted(EXECUTABLES))
+def test_launcher_is_executable_in_the_tree_and_in_git(exe):
+    script = ROOT / "scripts" / exe
+    assert os.access(script, os.X_OK)
+    if (ROOT / ".git").exists() and shutil.which("git"):
+        staged = subprocess.run(["git", "ls-files", "-s", f"scripts/{exe}"], cwd=ROOT,
+                                capture_output=True, text=True).stdout
+        if staged:  # a fresh clone gets its mode from git
+            assert staged.startswith("100755"), staged
+
+
+def test_installed_distribution_declares_the_console_scripts():
+    dist = importlib.metadata.distribution(PACKAGE)
+    scripts = {ep.name: ep.value for ep in dist.entry_points if ep.group == "console_scripts"}
+    assert scripts == EXECUTABLES
+
+
+# --------------------------------------------------------------------------------------------
+# `ros2 run horizon_mpc <exe>` from the venv: ament index lookup, then exec by shebang
+
+_TARGET_PROBE = """
+import importlib, importlib.util, sys
+
+module, func = sys.argv[1:3]
+try:
+    spec = importlib.util.find_spec(module)
+except ModuleNotFoundError as exc:
+    sys.exit(f"cannot find {module}: {exc}")
+if spec is None:
+    sys.exit(f"module {module} does not exist")
+if not callable(getattr(importlib.import_module(module), func, None)):
+    sys.exit(f"{module} has no callable {func!r}")
+"""
+
+
+def _shebang_interpreter(path: Path) -> str:
+    """The interpreter the kernel would run for ``path`` (``env NAME`` resolved on PATH)."""
+    first = path.read_text(encoding="utf-8").splitlines()[0]
+    assert first.startswith("#!"), f"{path} has no shebang line"
+    argv = first[2:].split()
+    if Path(argv[0]).name == "env":
+        name = next(a for a in argv[1:] if not a.startswith("-"))
+        resolved = shutil.which(name)
+        assert resolved, f"{path}: shebang interpreter {name!r} is not on PATH"
+        return resolved
+    assert os.access(argv[0], os.X_OK), f"{path}: shebang interpreter {argv[0]} missing"
+    return argv[0]
+
+
+@pytest.fixture(scope="module")
+def venv_package_prefix() -> Path:
+    from ament_index_python.packages import PackageNotFoundError
+
+    try:
+        return _get_package_prefix([sys.prefix])
+    except PackageNotFoundError:
+        pytest.fail(f"{PACKAGE} is not in the ament index of {sys.prefix}: run `make setup` "
+                    "(or, after `pip install -e .`, `python setup.py install_data -d "
+                    "\"$VIRTUAL_ENV\"`)")
+
+
+def test_ament_index_finds_the_package_in_the_venv_prefix(venv_package_prefix):
+    assert venv_package_prefix.resolve() == Path(sys.prefix).resolve()
+    assert (venv_package_prefix / "share" / PACKAGE / "package.xml").is_file()
+
+
+@pytest.mark.parametrize("exe", sorted(EXECUTABLES))
+def test_ros2_run_finds_an_executable_whose_target_exists(exe, venv_package_prefix):
+    path = venv_package_prefix / "lib" / PACKAGE / exe
+    assert path.is_file(), f"{path} missing: run `make setup`"
+    assert os.access(path, os.X_OK)
+    interpreter = _shebang_interpreter(path)
+    module, func = EXECUTABLES[exe].split(":")
+    proc = subprocess.run([interpreter, "-c", _TARGET_PROBE, module, func],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"{exe} -> {EXECUTABLES[exe]}: {proc.stderr.strip()[-2000:]}"
+
+
+# --------------------------------------------------------------------------------------------
+# Installs into a fresh prefix, offline: colcon's command line and pip's
+
+def test_colcon_style_install_puts_executables_in_lib_and_registers_the_package(tmp_path):
+    src = _copy_source(tmp_path / "src")
+    build, prefix = tmp_path / "build", tmp_path / "install"
+    build.mkdir()
+    # the command colcon runs for an ament_python package (colcon-core's python build task)
+    cmd = [sys.executable, "setup.py", "egg_info", "--egg-base", str(build),
+           "build", "--build-base", str(build / "build"),
+           "install", "--prefix", str(prefix), "--record", str(build / "install.log"),
+           "--single-version-externally-managed"]
+    proc = subprocess.run(cmd, cwd=src, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    for exe in EXECUTABLES:
+        assert os.access(prefix / "lib" / PACKAGE / exe, os.X_OK), exe
+    share = prefix / "share" / PACKAGE
+    assert (share / "package.xml").is_file()
+    assert sorted(p.name for p in (share / "config").glob("*.yaml")) == sorted(
+        p.name for p in (ROOT / "config").glob("*.yaml"))
+    assert _get_package_prefix([str(prefix)]) == prefix
+
+
+def test_pip_install_puts_launchers_in_lib_and_console_scripts_in_bin(tmp_path):
+    src = _copy_source(tmp_path / "src")
+    prefix = tmp_path / "prefix"
+    cmd = [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-index",
+           "--no-build-isolation", "--prefix", str(prefix), str(src)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    for exe in EXECUTABLES:
+        launcher = prefix / "lib" / PACKAGE / exe
+        assert os.access(launcher, os.X_OK), exe  # pip keeps the data file's exec bit
+        assert launcher.read_text() == (ROOT / "scripts" / exe).read_text()
+        assert os.access(prefix / "bin" / exe, os.X_OK), exe
+    assert _get_package_prefix([str(prefix)]) == prefix
+
+
+# --------------------------------------------------------------------------------------------
+# package.xml and the pip requirements
+
+REQUIRED_ROSDEP_KEYS = {
+    "rclpy", "std_msgs", "std_srvs", "sensor_msgs", "nav_msgs", "geometry_msgs",
+    "trajectory_msgs", "rosgraph_msgs", "diagnostic_msgs",
+    "pinocchio", "example-robot-data", "casadi-pip", "python3-pybullet-pip",
+    "python3-numpy", "python3-scipy", "python3-matplotlib", "python3-yaml", "python3-pil",
+}
+REQUIRED_PIP_PACKAGES = {
+    "casadi", "pin", "example-robot-data", "pybullet", "numpy", "scipy", "matplotlib",
+    "pyyaml", "pillow", "ros-jazzy-rclpy", "ros-jazzy-common-interfaces",
+}
+
+
+@pytest.fixture(scope="module")
+def package_xml() -> ElementTree.Element:
+    return ElementTree.parse(ROOT / "package.xml").getroot()
+
+
+def test_package_xml_is_an_ament_python_package_in_format_3(package_xml):
+    assert package_xml.tag == "package"
+    assert package_xml.get("format") == "3"
+    assert package_xml.findtext("name") == PACKAGE
+    assert package_xml.findtext("export/build_type") == "ament_python"
+    assert (ROOT / "resource" / PACKAGE).is_file()  # the ament index marker's source
+
+
+def test_package_xml_declares_the_runtime_and_test_dependencies(package_xml):
+    runtime = {e.text for tag in ("depend", "exec_depend") for e in package_xml.iter(tag)}
+    assert REQUIRED_ROSDEP_KEYS <= runtime, sorted(REQUIRED_ROSDEP_KEYS - runtime)
+    assert "python3-pytest" in {e.text for e in package_xml.iter("test_depend")}
+
+
+def test_package_xml_has_a_real_looking_maintainer_email(package_xml):
+    email = package_xml.find("maintainer").get("email")
+    assert re.fullmatch(r"[\w.+-]+@[\w-]+(\.[\w-]+)+", email), email
+    assert not re.search(r"\.(todo|example|invalid|test)$|@(example|todo)\.", email), email
+
+
+def test_version_is_the_same_in_package_xml_and_the_python_package(package_xml):
+    import horizon_mpc
+
+    assert horizon_mpc.__version__ == package_xml.findtext("version")
+
+
+def test_pip_requirements_are_declared_once_with_lower_bounds():
+    requirements = _setup_py_constant("INSTALL_REQUIRES")
+    names = {re.match(r"[A-Za-z0-9_.-]+", r).group(0).lower() for r in requirements}
+    assert names == REQUIRED_PIP_PACKAGES
+    assert all(">=" in r for r in requirements), requirements
+    assert not (ROOT / "requirements.txt").exists()  # setup.py is the single source
+
+
+# --------------------------------------------------------------------------------------------
+# Makefile setup: pip only when its inputs change, data files only when they change
+
+@pytest.fixture
+def make_tree(tmp_path):
+    if not shutil.which("make"):
+        pytest.skip("make is not installed")
+    tree = _copy_source(tmp_path / "tree")
+    old = time.time() - 1000
+    for path in tree.rglob("*"):
+        os.utime(path, (old, old))
+    return tree
+
+
+def _make(tree: Path, *args: str) -> str:
+    proc = subprocess.run(["make", "--no-print-directory", *args, f"PYTHON={sys.executable}"],
+                          cwd=tree, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout
+
+
+def _stamped_venv(tree: Path) -> Path:
+    """A fake, fully set-up venv: an interpreter file and both stamps, newer than the sources."""
+    venv = tree / "venv"
+    (venv / "bin").mkdir(parents=True)
+    (venv / "bin" / "python").touch()
+    now = time.time()
+    for offset, var in ((-500, "DEPS_STAMP"), (-400, "DATA_STAMP")):
+        stamp = tree / _make(tree, "-s", f"print-{var}", f"VENV={venv}").strip()
+        stamp.touch()
+        os.utime(stamp, (now + offset, now + offset))
+    return venv
+
+
+def test_make_setup_creates_the_venv_and_installs_on_a_fresh_clone(make_tree):
+    dry_run = _make(make_tree, "-n", "setup", f"VENV={make_tree / 'venv'}")
+    assert "-m venv" in dry_run
+    assert "-m pip install" in dry_run
+    assert "install_data" in dry_run
+
+
+def test_make_setup_does_nothing_once_set_up(make_tree):
+    venv = _stamped_venv(make_tree)
+    dry_run = _make(make_tree, "-n", "setup", f"VENV={venv}")
+    assert "pip" not in dry_run and "install_data" not in dry_run, dry_run
+
+
+def test_make_setup_reruns_pip_when_setup_py_changes(make_tree):
+    venv = _stamped_venv(make_tree)
+    with open(make_tree / "setup.py", "a", encoding="utf-8") as fh:
+        fh.write("# a new dependency would go here\n")
+    assert "-m pip install" in _make(make_tree, "-n", "setup", f"VENV={venv}")
+
+
+def test_make_setup_only_recopies_data_files_when_a_config_changes(make_tree):
+    venv = _stamped_venv(make_tree)
+    (make_tree / "config" / "go2.yaml").touch()
+    dry_run = _make(make_tree, "-n", "setup", f"VENV={venv}")
+    assert "install_data" in dry_run
+    assert "pip install" not in dry_run
+
+
+# --------------------------------------------------------------------------------------------
+# Network hygiene and CI
+
+def test_test_session_uses_a_private_ros_domain_on_localhost():
+    assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    assert domain != 0 and (1 <= domain <= 101 or 215 <= domain <= 232)
+
+
+def test_makefile_keeps_dds_on_localhost_in_a_private_domain():
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    assert "export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST" in makefile
+    assert "export ROS_DOMAIN_ID" in makefile
+    assert "export AMENT_PREFIX_PATH" in makefile
+
+
+def test_ci_runs_the_readme_test_command():
+    ci = ROOT / ".ci" / "run"
+    text = ci.read_text(encoding="utf-8")
+    assert os.access(ci, os.X_OK)
+    assert "set -euo pipefail" in text
+    assert "export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST" in text
+    assert text.rstrip().splitlines()[-1] == "exec make test"
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert "make test" in readme and "make demo" in readme
