@@ -1,0 +1,140 @@
+"""IPOPT through CasADi ``nlpsol`` on the problem's transcription (built once).
+
+Options (``make_solver('ipopt', prb, opts)``):
+
+================== ======== ===========================================================
+``max_iter``       3000     IPOPT iteration limit
+``tol``            1e-8     IPOPT convergence tolerance
+``constr_viol_tol`` 1e-8    IPOPT constraint-violation tolerance
+``print_level``    0        IPOPT verbosity (0..12); ``print_time`` prints CasADi timings
+``linear_solver``  'mumps'  IPOPT linear solver ('mumps', 'spral')
+``sym``            'SX'     graph type of the transcription ('SX' or 'MX')
+``warm_start_duals`` True   keep multipliers between solves and start IPOPT from them
+``warm_mu_init``   1e-4     barrier parameter of a warm solve (cold solves use IPOPT's)
+``warm_bound_push`` 1e-6    ``warm_start_bound_push``/``_mult_bound_push`` of a warm solve
+``ipopt.<name>``   -        any other IPOPT option, passed through unchecked
+``nlpsol.<name>``  -        any CasADi nlpsol option (e.g. ``nlpsol.expand``)
+================== ======== ===========================================================
+
+IPOPT options cannot change on an ``nlpsol`` instance, so a warm solve runs a second
+instance (``warm_start_init_point yes``) built once, on first need, from the same NLP.
+Changing an option with :meth:`set_option` rebuilds the instances, never the NLP.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import casadi as cs
+import numpy as np
+
+from horizon_mpc.problem import Problem
+from horizon_mpc.problem.transcription import Transcription
+from horizon_mpc.solvers.base import Solver
+
+__all__ = ["IpoptSolver"]
+
+log = logging.getLogger(__name__)
+
+
+class IpoptSolver(Solver):
+    """Interior-point solve of the full NLP (general costs allowed).
+
+    Attributes:
+        transcription: the :class:`Transcription` (``transcription.nlp`` is the NLP).
+        lam_x, lam_g: multipliers of the last solve (None before), kept for warm starts.
+    """
+
+    name = "ipopt"
+    DEFAULTS: dict[str, Any] = {
+        "max_iter": 3000, "tol": 1e-8, "constr_viol_tol": 1e-8, "print_level": 0,
+        "print_time": False, "linear_solver": "mumps", "sym": "SX", "warm_start_duals": True,
+        "warm_mu_init": 1e-4, "warm_bound_push": 1e-6,
+    }
+    _IPOPT_ALIASES = ("max_iter", "tol", "constr_viol_tol", "print_level", "linear_solver")
+
+    def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
+        super().__init__(prb, opts)
+        self.transcription = Transcription(prb, sym=self.opts["sym"])
+        self._solvers: dict[bool, cs.Function] = {}
+        self.lam_x: np.ndarray | None = None
+        self.lam_g: np.ndarray | None = None
+        self.w: np.ndarray | None = None
+
+    def _passthrough_keys(self, opts: dict[str, Any]) -> list[str]:
+        return [k for k in opts if k.startswith(("ipopt.", "nlpsol."))]
+
+    def set_option(self, key: str, value: Any) -> None:
+        """Change one option; the IPOPT instances are rebuilt on the next solve."""
+        if key == "sym" and value != self.opts["sym"]:
+            raise ValueError("option 'sym' fixes the NLP graph; set it when building the solver")
+        super().set_option(key, value)
+        self._solvers.clear()
+
+    # ------------------------------------------------------------------ instances
+    def _nlpsol(self, warm: bool) -> cs.Function:
+        if warm not in self._solvers:
+            o = self.opts
+            ipopt = {k: o[k] for k in self._IPOPT_ALIASES}
+            ipopt["sb"] = "yes"
+            if warm:
+                ipopt.update({"warm_start_init_point": "yes", "mu_init": o["warm_mu_init"],
+                              "warm_start_bound_push": o["warm_bound_push"],
+                              "warm_start_mult_bound_push": o["warm_bound_push"],
+                              "warm_start_slack_bound_push": o["warm_bound_push"]})
+            ipopt.update({k[6:]: v for k, v in o.items() if k.startswith("ipopt.")})
+            nlp_opts = {"ipopt": ipopt, "print_time": o["print_time"], "error_on_fail": False}
+            nlp_opts.update({k[7:]: v for k, v in o.items() if k.startswith("nlpsol.")})
+            t0 = time.perf_counter()
+            self._solvers[warm] = cs.nlpsol(f"ipopt_{'warm' if warm else 'cold'}", "ipopt",
+                                            self.transcription.nlp, nlp_opts)
+            log.debug("built %s ipopt instance in %.3f s", "warm" if warm else "cold",
+                      time.perf_counter() - t0)
+        return self._solvers[warm]
+
+    # ------------------------------------------------------------------ solve
+    def _solve(self) -> bool:
+        tr = self.transcription
+        lbx, ubx = tr.bounds_w()
+        lbg, ubg = tr.bounds_g()
+        args = {"x0": tr.initial_w(), "p": tr.parameters(), "lbx": lbx, "ubx": ubx,
+                "lbg": lbg, "ubg": ubg}
+        warm = bool(self.opts["warm_start_duals"] and self.lam_x is not None)
+        if warm:
+            args.update(lam_x0=self.lam_x, lam_g0=self.lam_g)
+        solver = self._nlpsol(warm)
+        t0 = time.perf_counter()
+        res = solver(**args)
+        elapsed = time.perf_counter() - t0
+        st = solver.stats()
+        w, g = res["x"].full().ravel(), res["g"].full().ravel()
+        self.w = w
+        self.lam_x, self.lam_g = res["lam_x"].full().ravel(), res["lam_g"].full().ravel()
+        self._split_solution(*tr.unpack(w))
+        s = self.stats
+        s.success = bool(st.get("success", False))
+        s.status = str(st.get("return_status", "unknown"))
+        s.iterations = int(st.get("iter_count", 0))
+        s.time = elapsed
+        s.cost = float(res["f"])
+        s.constraint_violation = tr.violation(w, g, lbx, ubx, lbg, ubg)
+        s.history = []
+        s.extra = {"warm": warm, "t_wall_ipopt": float(st.get("t_wall_total", np.nan))}
+        log.debug("ipopt %s: %s in %d iterations, %.4f s, cost %.6g, violation %.2e",
+                  "warm" if warm else "cold", s.status, s.iterations, s.time, s.cost,
+                  s.constraint_violation)
+        return s.success
+
+    def shift(self) -> None:
+        """Shift the guesses and parameters (``Problem.shift``) and the multipliers."""
+        super().shift()
+        tr = self.transcription
+        if self.lam_x is not None:
+            self.lam_x = tr.shift_vector(self.lam_x, tr.w_blocks)
+            self.lam_g = tr.shift_vector(self.lam_g, tr.g_blocks)
+
+    def reset(self) -> None:
+        """Forget the multipliers: the next solve is cold."""
+        self.lam_x = self.lam_g = None
