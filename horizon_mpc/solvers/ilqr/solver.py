@@ -1,0 +1,324 @@
+"""Multiple-shooting, constrained iterative LQR (``make_solver('ilqr', prb, opts)``).
+
+One iteration (the real-time iteration of the MPC):
+
+1. quadratise all nodes in one compiled mapped call (dynamics Jacobians in the tangent
+   space, Gauss-Newton model of the residual costs and of the augmented-Lagrangian rows);
+2. backward Riccati recursion with the defects (gaps) of the warm start as affine terms,
+   Levenberg-Marquardt regularisation raised on failure;
+3. linear rollout of the full Gauss-Newton step, which closes the linearised gaps;
+4. backtracking line search on the merit ``cost + AL terms + nu * ||gaps||_1``;
+5. multiplier and penalty update of the augmented Lagrangian.
+
+Equality constraints and every bound are honoured through the augmented Lagrangian and
+driven to feasibility over the iterations; nothing the problem declares is dropped.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from horizon_mpc.problem import Problem
+from horizon_mpc.solvers.base import Solver
+from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian
+from horizon_mpc.solvers.ilqr.riccati import backward_pass, linear_rollout
+from horizon_mpc.solvers.ilqr.stages import build_stage_model
+
+__all__ = ["IlqrSolver"]
+
+log = logging.getLogger(__name__)
+
+
+def _blocks(out, n: int, rows: int, cols: int) -> np.ndarray:
+    """(rows, cols*n) CasADi output -> (n, rows, cols)."""
+    a = np.asarray(out).reshape(rows, n, cols) if cols else np.zeros((rows, n, 0))
+    return a.transpose(1, 0, 2)
+
+
+class IlqrSolver(Solver):
+    """Constrained multiple-shooting ILQR; see the module docstring.
+
+    Options (defaults in ``DEFAULTS``): ``max_iter``; ``rti`` (True: exactly
+    ``iterations_per_call`` iterations per ``solve()``, no convergence loop);
+    ``iterations_per_call``; ``tol`` (stationarity: expected decrease relative to the cost);
+    ``tol_constraint`` (defects, constraints, bounds; inf-norm); ``mu_init``/``mu_min``/
+    ``mu_max`` (regularisation); ``rho_init``/``rho_factor``/``rho_max`` (AL penalty);
+    ``line_search_steps`` (number of halvings); ``time_budget`` (s per call, None: none);
+    ``codegen`` (compile the node functions); ``callback`` (called with a dict per iteration).
+    """
+
+    name = "ilqr"
+    DEFAULTS: dict[str, Any] = {
+        "max_iter": 100,
+        "rti": False,
+        "iterations_per_call": 1,
+        "tol": 1e-8,
+        "tol_constraint": 1e-6,
+        "mu_init": 1e-8,
+        "mu_min": 1e-10,
+        "mu_max": 1e10,
+        "rho_init": 1e2,
+        "rho_factor": 10.0,
+        "rho_max": 1e9,
+        "line_search_steps": 10,
+        "time_budget": None,
+        "codegen": True,
+        "callback": None,
+    }
+
+    def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
+        super().__init__(prb, opts)
+        self.model = build_stage_model(prb, codegen=bool(self.opts["codegen"]))
+        m = self.model
+        N = m.n_nodes
+        self._al = AugmentedLagrangian(np.full((N, m.nc), -np.inf), np.full((N, m.nc), np.inf),
+                                       self.opts["rho_init"])
+        self._alN = AugmentedLagrangian(np.full((1, m.ncN), -np.inf),
+                                        np.full((1, m.ncN), np.inf), self.opts["rho_init"])
+        self.mu = self.opts["mu_init"]
+        self._difference = prb.state_difference()
+        self.feedback_gains = np.zeros((N, m.nu, m.ndx))
+        self.timings: dict[str, float] = {}
+
+    # ------------------------------------------------------------------ problem data
+    def _gather(self) -> None:
+        """Read guesses, parameters, bounds and weights from the problem (once per solve)."""
+        prb, m = self.prb, self.model
+        N = m.n_nodes
+        self.X = prb.stacked("state").T.copy()  # (N+1, nx)
+        self.U = prb.stacked("input").T.copy()  # (N, nu)
+        self.S = prb.stacked("single", "lower_bounds")  # fixed singles, (ns, 1)
+        self.P = prb.parameter_values()  # (np, N+1)
+        xlb, xub = prb.stacked("state", "lower_bounds"), prb.stacked("state", "upper_bounds")
+        ulb, uub = prb.stacked("input", "lower_bounds"), prb.stacked("input", "upper_bounds")
+        self.x_init = None
+        if np.all(np.isfinite(xlb[:, 0])) and np.array_equal(xlb[:, 0], xub[:, 0]):
+            self.x_init = xlb[:, 0].copy()
+            xlb, xub = xlb.copy(), xub.copy()
+            xlb[:, 0], xub[:, 0] = -np.inf, np.inf
+        # stage rows: constraints, then x bounds, then u bounds
+        lb, ub = np.full((N, m.nc), -np.inf), np.full((N, m.nc), np.inf)
+        i = 0
+        for con in m.stage_cons:
+            act = con.active[:N]
+            lb[act, i:i + con.dim] = con.lower_bounds[:, :N].T[act]
+            ub[act, i:i + con.dim] = con.upper_bounds[:, :N].T[act]
+            i += con.dim
+        lb[:, i:i + m.nx], ub[:, i:i + m.nx] = xlb[:, :N].T, xub[:, :N].T
+        i += m.nx
+        lb[:, i:], ub[:, i:] = ulb.T, uub.T
+        self._al.set_bounds(lb, ub)
+        lbN, ubN = np.full((1, m.ncN), -np.inf), np.full((1, m.ncN), np.inf)
+        i = 0
+        for con in m.term_cons:
+            if con.active[N]:
+                lbN[0, i:i + con.dim] = con.lower_bounds[:, N]
+                ubN[0, i:i + con.dim] = con.upper_bounds[:, N]
+            i += con.dim
+        lbN[0, i:], ubN[0, i:] = xlb[:, N], xub[:, N]
+        self._alN.set_bounds(lbN, ubN)
+        self.Wr = self._weights(m.stage_costs, N, range(N))  # (N, nr)
+        self.WrN = self._weights(m.term_costs, 1, [N])  # (1, nrN)
+
+    @staticmethod
+    def _weights(costs, n: int, nodes) -> np.ndarray:
+        cols = [np.outer(c.active[list(nodes)], c.weight) for c in costs]
+        return np.hstack(cols) if cols else np.zeros((n, 0))
+
+    # ------------------------------------------------------------------ evaluation
+    def _evaluate(self, X: np.ndarray, U: np.ndarray) -> dict[str, Any] | None:
+        """Defects, residuals and constraints at (X, U); None if anything is not finite."""
+        m, N = self.model, self.model.n_nodes
+        gap, r, c = m.values(X[:N].T, U.T, self.S, self.P[:, :N], X[1:].T)
+        rN, cN = m.values_term(X[N], self.S, self.P[:, N])
+        ev = {
+            "gap": np.asarray(gap).T,  # (N, ndx)
+            "r": np.asarray(r).T.reshape(N, m.nr),
+            "c": np.asarray(c).T.reshape(N, m.nc),
+            "rN": np.asarray(rN).reshape(1, m.nrN),
+            "cN": np.asarray(cN).reshape(1, m.ncN),
+        }
+        if self.x_init is not None:
+            ev["d0"] = np.asarray(self._difference(X[0], self.x_init)).reshape(m.ndx)
+        else:
+            ev["d0"] = np.zeros(m.ndx)
+        if not all(np.all(np.isfinite(v)) for v in ev.values()):
+            return None
+        ev["cost"] = float(np.sum(self.Wr * ev["r"] ** 2) + np.sum(self.WrN * ev["rN"] ** 2))
+        ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
+        ev["gap_l1"] = float(np.sum(np.abs(ev["gap"])) + np.sum(np.abs(ev["d0"])))
+        ev["viol"] = float(max(
+            np.max(np.abs(ev["gap"]), initial=0.0), np.max(np.abs(ev["d0"]), initial=0.0),
+            np.max(self._al.violation(ev["c"]), initial=0.0),
+            np.max(self._alN.violation(ev["cN"]), initial=0.0)))
+        return ev
+
+    def _merit(self, ev: dict[str, Any], nu: float) -> float:
+        return ev["cost"] + ev["al"] + nu * ev["gap_l1"]
+
+    def _quadratise(self, X, U, ev):
+        m, N = self.model, self.model.n_nodes
+        wc, tc = self._al.weights_targets(ev["c"])
+        wcN, tcN = self._alN.weights_targets(ev["cN"])
+        A, B, lx, lu, lxx, luu, lux = m.quadratise(X[:N].T, U.T, self.S, self.P[:, :N],
+                                                   self.Wr.T, wc.T, tc.T)
+        lxN, lxxN = m.quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T, tcN.T)
+        ndx, nu = m.ndx, m.nu
+        q = {
+            "A": _blocks(A, N, ndx, ndx), "B": _blocks(B, N, ndx, nu),
+            "lx": np.asarray(lx).T.reshape(N, ndx), "lu": np.asarray(lu).T.reshape(N, nu),
+            "lxx": _blocks(lxx, N, ndx, ndx), "luu": _blocks(luu, N, nu, nu),
+            "lux": _blocks(lux, N, nu, ndx),
+            "lxN": np.asarray(lxN).reshape(ndx), "lxxN": np.asarray(lxxN).reshape(ndx, ndx),
+        }
+        if not all(np.all(np.isfinite(v)) for v in q.values()):
+            return None
+        return q
+
+    def _retract(self, X, dX, alpha):
+        m = self.model
+        Xn = np.asarray(m.integrate(X.T, alpha * dX.T)).T
+        return Xn
+
+    # ------------------------------------------------------------------ iterations
+    def _iterate(self, ev: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:
+        """One ILQR iteration from (self.X, self.U) with its evaluation ``ev``."""
+        m, o = self.model, self.opts
+        t0 = time.perf_counter()
+        q = self._quadratise(self.X, self.U, ev)
+        t1 = time.perf_counter()
+        info = {"mu": self.mu, "alpha": 0.0, "accepted": 0.0}
+        if q is None:
+            self.mu = min(max(self.mu * 100, 1e-6), o["mu_max"])
+            info["status_nan"] = 1.0
+            return ev, info
+        # backward pass; raise the regularisation until every Q_uu is positive definite
+        while True:
+            bw = backward_pass(q["A"], q["B"], q["lx"], q["lu"], q["lxx"], q["luu"], q["lux"],
+                               ev["gap"], q["lxN"], q["lxxN"], self.mu)
+            if bw is not None:
+                break
+            if self.mu >= o["mu_max"]:
+                info["backward_failed"] = 1.0
+                return ev, info
+            self.mu = min(max(self.mu * 10, 1e-6), o["mu_max"])
+        t2 = time.perf_counter()
+        if self.x_init is not None:
+            dx0 = ev["d0"]
+        else:
+            S0 = bw.S[0] + 1e-9 * np.eye(m.ndx)
+            dx0 = -np.linalg.solve(S0, bw.s[0])
+        dX, dU = linear_rollout(q["A"], q["B"], ev["gap"], bw, dx0)
+        self.feedback_gains = bw.K
+        # directional derivative of the model cost along the step; the gaps shrink linearly
+        slope = float(np.einsum("ij,ij->", q["lx"], dX[:-1]) + np.einsum("ij,ij->", q["lu"], dU)
+                      + q["lxN"] @ dX[-1])
+        # l1 merit weight above the dynamics multipliers s_k + S_k dx_k of the LQ solution
+        costates = bw.s + np.einsum("kij,kj->ki", bw.S, dX)
+        self._nu = max(self._nu, 1.5 * float(np.max(np.abs(costates))), 1.0)
+        nu = self._nu
+        merit0 = self._merit(ev, nu)
+        deriv = slope - nu * ev["gap_l1"]
+        t3 = time.perf_counter()
+        alpha, best = 1.0, None
+        for _ in range(max(1, o["line_search_steps"])):
+            Xt = self._retract(self.X, dX, alpha)
+            Ut = self.U + alpha * dU
+            evt = self._evaluate(Xt, Ut)
+            if evt is not None:
+                mt = self._merit(evt, nu)
+                if mt <= merit0 + 1e-4 * alpha * min(deriv, 0.0) or (
+                        deriv >= 0 and mt < merit0):
+                    best = (Xt, Ut, evt)
+                    break
+            alpha *= 0.5
+        t4 = time.perf_counter()
+        if best is None:
+            self.mu = min(max(self.mu * 10, 1e-6), o["mu_max"])
+            info.update(expected=deriv)
+        else:
+            self.X, self.U, ev = best
+            self.mu = max(self.mu / 10, o["mu_min"])
+            info.update(alpha=alpha, accepted=1.0, expected=deriv)
+        info["step_norm"] = float(alpha * (np.max(np.abs(dX)) + np.max(np.abs(dU), initial=0)))
+        for key, dt in (("quadratise", t1 - t0), ("backward", t2 - t1), ("rollout", t3 - t2),
+                        ("line_search", t4 - t3)):
+            self.timings[key] = self.timings.get(key, 0.0) + dt
+        return ev, info
+
+    def _solve(self) -> bool:
+        o = self.opts
+        t_start = time.perf_counter()
+        self.timings = {}
+        self._nu = 0.0
+        self._gather()
+        ev = self._evaluate(self.X, self.U)
+        if ev is None:
+            self.stats.success, self.stats.status = False, "initial guess not finite"
+            self._publish(ev)
+            return False
+        rti = bool(o["rti"])
+        n_iter = int(o["iterations_per_call"]) if rti else int(o["max_iter"])
+        history, status, converged = [], "max_iter", False
+        it = 0
+        for it in range(1, n_iter + 1):
+            ev, info = self._iterate(ev)
+            stationary = abs(info.get("expected", 0.0)) <= o["tol"] * (1.0 + ev["cost"]) or (
+                info.get("step_norm", 1.0) < 1e-10)
+            # multiplier update after every iteration (a primal-dual scheme; waiting for
+            # inner convergence costs many more Gauss-Newton iterations)
+            self._al.update(ev["c"], o["rho_factor"], o["rho_max"])
+            self._alN.update(ev["cN"], o["rho_factor"], o["rho_max"])
+            ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
+            rec = {"iter": it, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
+                   "violation": ev["viol"], **info}
+            history.append(rec)
+            if o["callback"] is not None:
+                o["callback"](rec)
+            if o["verbose"]:
+                log.info("ilqr %3d cost %.6e viol %.2e alpha %.3f mu %.1e", it, ev["cost"],
+                         ev["viol"], info["alpha"], self.mu)
+            if not rti and stationary and ev["viol"] <= o["tol_constraint"]:
+                status, converged = "converged", True
+                break
+            if info.get("backward_failed"):
+                status = "regularisation limit reached"
+                break
+            if o["time_budget"] is not None and time.perf_counter() - t_start > o["time_budget"]:
+                status = "time budget"
+                break
+        if rti:
+            status = "rti"
+            converged = ev["viol"] <= max(o["tol_constraint"], 1e-3) and np.isfinite(ev["cost"])
+        self.stats.iterations = it
+        self.stats.status = status
+        self.stats.success = bool(converged)
+        self.stats.history = history
+        self.stats.time = time.perf_counter() - t_start
+        self._publish(ev)
+        return bool(converged)
+
+    def _publish(self, ev) -> None:
+        self.stats.cost = ev["cost"] if ev else math.nan
+        self.stats.constraint_violation = ev["viol"] if ev else math.nan
+        self.stats.extra = {"mu": self.mu, "timings": dict(self.timings)}
+        if ev is None:
+            return
+        self._split_solution(self.X.T.copy(), self.U.T.copy(), self.S)
+
+    # ------------------------------------------------------------------ receding horizon
+    def shift(self) -> None:
+        """Shift the problem's guesses/parameters and the AL multipliers one node back."""
+        super().shift()
+        self._al.shift()
+
+    def reset_multipliers(self) -> None:
+        """Forget the augmented-Lagrangian state (e.g. after a solver failure)."""
+        self._al.reset()
+        self._alN.reset()
+        self.mu = self.opts["mu_init"]

@@ -1,0 +1,196 @@
+"""The ILQR's view of a Problem: stacked stage and terminal functions, mapped over nodes.
+
+Every quantity the ILQR needs at a node is produced by ONE compiled call mapped over all
+nodes (Python -> CasADi calls cost ~40 us each, so never one call per node):
+
+* ``values``  (x, u, s, p, x_next) -> (gap, r, c): the dynamics defect
+  ``F(x, u) (-) x_next`` in the tangent space, the stacked cost residuals and constraints;
+* ``quadratise`` (x, u, s, p, w_r, w_c, t_c) -> (A, B, lx, lu, lxx, luu, lux): the
+  dynamics Jacobians in the tangent space and the Gauss-Newton model of
+  ``sum_i w_r,i r_i^2 + sum_j w_c,j (c_j - t_c,j)^2`` (the augmented-Lagrangian rows of
+  the constraints enter through ``w_c``/``t_c``, chosen numerically by the solver).
+
+Jacobians are taken with respect to ``dx`` in ``x (+) dx`` at ``dx = 0``, so states on a
+manifold (quaternions) are handled in their tangent space.
+
+Constraint rows: the problem's constraints valid on the stage (or terminal) node, then
+the state bounds (nx rows, on stage and terminal nodes) and the input bounds (nu rows, stage).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import casadi as cs
+import numpy as np
+
+from horizon_mpc.problem import Problem
+from horizon_mpc.problem.terms import Constraint, Cost, GeneralCost
+
+__all__ = ["StageModel", "build_stage_model"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class StageModel:
+    """Mapped functions and row layouts of a problem for the ILQR.
+
+    Row layouts (``*_rows``) list ``(term name, start, stop)`` in the stacked vectors.
+    """
+
+    nx: int
+    ndx: int
+    nu: int
+    n_nodes: int
+    stage_costs: list[Cost]
+    term_costs: list[Cost]
+    stage_cons: list[Constraint]
+    term_cons: list[Constraint]
+    nr: int
+    nrN: int
+    nc: int
+    ncN: int
+    values: cs.Function  # mapped over N stage nodes
+    quadratise: cs.Function  # mapped over N stage nodes
+    values_term: cs.Function
+    quadratise_term: cs.Function
+    integrate: cs.Function  # (x, dx) -> x, mapped over N+1 nodes
+    difference: cs.Function  # (x0, x1) -> dx, mapped over N+1 nodes
+
+
+def _check_supported(prb: Problem) -> None:
+    for term in [*prb.constraints.values(), *prb.costs.values()]:
+        if isinstance(term, GeneralCost):
+            raise ValueError(f"ilqr needs residual costs (Gauss-Newton); {term.name!r} is a "
+                             "general cost: write it as create_cost(name, residual) or use "
+                             "the ipopt solver")
+        if term.offsets:
+            raise ValueError(f"ilqr does not support terms with offset variables "
+                             f"({term.kind} {term.name!r} uses offsets {term.offsets}); use "
+                             "ipopt or gnsqp, or add the previous value to the state")
+    for v in prb.singles:
+        if not np.array_equal(v.lower_bounds, v.upper_bounds):
+            raise ValueError(f"ilqr cannot optimise single variable {v.name!r} (e.g. a free "
+                             "duration): fix it with equal bounds or use ipopt/gnsqp")
+    if prb.transcription != "multiple_shooting":
+        raise ValueError(f"ilqr is a shooting method; the problem is transcribed with "
+                         f"{prb.transcription!r}: call prb.transcribe('multiple_shooting')")
+
+
+def _jac(expr: cs.SX, sym: cs.SX) -> cs.SX:
+    return cs.jacobian(expr, sym) if sym.numel() else cs.SX(expr.numel(), 0)
+
+
+def _gn(res, jx, ju, w, t):
+    """Gauss-Newton terms of sum w (res - t)^2 (gradient and Hessian blocks)."""
+    e = w * (res - t)
+    wjx = cs.mtimes(cs.diag(w), jx) if res.numel() else jx
+    lx = 2 * cs.mtimes(jx.T, e)
+    lxx = 2 * cs.mtimes(jx.T, wjx)
+    if ju is None:
+        return lx, lxx
+    wju = cs.mtimes(cs.diag(w), ju) if res.numel() else ju
+    return lx, 2 * cs.mtimes(ju.T, e), lxx, 2 * cs.mtimes(ju.T, wju), 2 * cs.mtimes(ju.T, wjx)
+
+
+def _compile(fn: cs.Function, enabled: bool) -> cs.Function:
+    if not enabled:
+        return fn
+    try:
+        from horizon_mpc.codegen import compile_function
+    except ImportError:  # pragma: no cover - codegen module absent
+        log.warning("horizon_mpc.codegen not available: running %s in the CasADi VM", fn.name())
+        return fn
+    return compile_function(fn)
+
+
+def build_stage_model(prb: Problem, codegen: bool = True) -> StageModel:
+    """Build the mapped value and quadratisation functions of ``prb`` (finalized).
+
+    Raises:
+        ValueError: the problem uses something the ILQR cannot honour (general costs,
+            offset terms, free single variables, collocation).
+    """
+    prb.finalize()
+    _check_supported(prb)
+    N = prb.n_nodes
+    nx, ndx, nu, ns, npar = prb.nx, prb.ndx, prb.nu, prb.ns, prb.np_
+    x, u = cs.SX.sym("x", nx), cs.SX.sym("u", nu)
+    s, p = cs.SX.sym("s", ns), cs.SX.sym("p", npar)
+    dx = cs.SX.sym("dx", ndx)
+    xt = prb.integrate_expr(x, dx)
+    stage_costs = [c for c in prb.costs.values() if c.valid_nodes.min() < N]
+    term_costs = [c for c in prb.costs.values() if not c.uses_input and c.valid_nodes.max() == N]
+    stage_cons = [c for c in prb.constraints.values() if c.valid_nodes.min() < N]
+    term_cons = [c for c in prb.constraints.values()
+                 if not c.uses_input and c.valid_nodes.max() == N]
+
+    def stack(terms, xx, uu):
+        parts = [t.function(xx, uu, s, p) for t in terms]
+        return cs.vertcat(*parts) if parts else cs.SX(0, 1)
+
+    def at0(e):
+        return cs.substitute(e, dx, cs.DM.zeros(ndx))
+
+    # ---- stage: dynamics, residuals, constraints (+ state and input bounds)
+    F = prb.discrete_dynamics()
+    x_next_nom = F(x, u, s, p)
+    x_next = F(xt, u, s, p)
+    # Jacobians in the tangent space at F(x, u): differentiate with the reference held fixed
+    x_ref = cs.SX.sym("x_ref", nx)
+    f_dx = prb.difference_expr(x_ref, x_next)
+    A = cs.substitute(at0(_jac(f_dx, dx)), x_ref, x_next_nom)
+    B = cs.substitute(at0(_jac(f_dx, u)), x_ref, x_next_nom)
+    r = stack(stage_costs, xt, u)
+    c = cs.vertcat(stack(stage_cons, xt, u), xt, u)
+    rx, ru = at0(_jac(r, dx)), at0(_jac(r, u))
+    cx, cu = at0(_jac(c, dx)), at0(_jac(c, u))
+    r0, c0 = at0(r), at0(c)
+    nr, nc = r.numel(), c.numel()
+    w_r, w_c, t_c = cs.SX.sym("w_r", nr), cs.SX.sym("w_c", nc), cs.SX.sym("t_c", nc)
+    lx1, lu1, lxx1, luu1, lux1 = _gn(r0, rx, ru, w_r, cs.DM.zeros(nr))
+    lx2, lu2, lxx2, luu2, lux2 = _gn(c0, cx, cu, w_c, t_c)
+    d = cs.densify
+    x_nxt = cs.SX.sym("x_next", nx)
+    gap = prb.difference_expr(x_nxt, x_next_nom)  # F(x, u) (-) x_next
+    values = cs.Function("ilqr_values", [x, u, s, p, x_nxt], [gap, r0, c0],
+                         ["x", "u", "s", "p", "x_next"], ["gap", "r", "c"])
+    quad = cs.Function(
+        "ilqr_quadratise", [x, u, s, p, w_r, w_c, t_c],
+        [d(A), d(B), d(lx1 + lx2), d(lu1 + lu2), d(lxx1 + lxx2), d(luu1 + luu2),
+         d(lux1 + lux2)],
+        ["x", "u", "s", "p", "w_r", "w_c", "t_c"], ["A", "B", "lx", "lu", "lxx", "luu", "lux"])
+
+    # ---- terminal: residuals and constraints on x only (+ state bounds)
+    uN = cs.SX(0, 1)
+    rN = stack(term_costs, xt, cs.DM.zeros(nu) if nu else uN)
+    cN = cs.vertcat(stack(term_cons, xt, cs.DM.zeros(nu) if nu else uN), xt)
+    rNx, cNx = at0(_jac(rN, dx)), at0(_jac(cN, dx))
+    rN0, cN0 = at0(rN), at0(cN)
+    nrN, ncN = rN.numel(), cN.numel()
+    w_rN, w_cN, t_cN = cs.SX.sym("w_r", nrN), cs.SX.sym("w_c", ncN), cs.SX.sym("t_c", ncN)
+    lxN1, lxxN1 = _gn(rN0, rNx, None, w_rN, cs.DM.zeros(nrN))
+    lxN2, lxxN2 = _gn(cN0, cNx, None, w_cN, t_cN)
+    values_term = cs.Function("ilqr_values_term", [x, s, p], [rN0, cN0],
+                              ["x", "s", "p"], ["r", "c"])
+    quad_term = cs.Function("ilqr_quadratise_term", [x, s, p, w_rN, w_cN, t_cN],
+                            [d(lxN1 + lxN2), d(lxxN1 + lxxN2)],
+                            ["x", "s", "p", "w_r", "w_c", "t_c"], ["lx", "lxx"])
+
+    integ, diff = prb.state_integrate(), prb.state_difference()
+    log.info("ilqr stage model: nx=%d ndx=%d nu=%d N=%d, %d residual rows, %d constraint rows "
+             "(terminal %d/%d)", nx, ndx, nu, N, nr, nc, nrN, ncN)
+    return StageModel(
+        nx=nx, ndx=ndx, nu=nu, n_nodes=N,
+        stage_costs=stage_costs, term_costs=term_costs,
+        stage_cons=stage_cons, term_cons=term_cons,
+        nr=nr, nrN=nrN, nc=nc, ncN=ncN,
+        values=_compile(values.map(N, "serial"), codegen),
+        quadratise=_compile(quad.map(N, "serial"), codegen),
+        values_term=_compile(values_term, codegen),
+        quadratise_term=_compile(quad_term, codegen),
+        integrate=integ.map(N + 1, "serial"),
+        difference=diff.map(N + 1, "serial"),
+    )
