@@ -154,6 +154,10 @@ class Simulator:
             self.client, self.urdf_path, [Path(d) for d in (search_dirs or [])], self.friction
         )
         self.body = self.robot.body
+        # pybullet's base pose is the root link's inertial frame: T_com->base, applied on reads
+        self._com_to_base = tuple(
+            tuple(float(x) for x in a)
+            for a in transform_inverse(self.robot.inertial_pos, self.robot.inertial_quat))
         missing = [n for n in names if n not in self.robot.joint_index]
         if missing:
             raise ValueError(f"joints {missing} of the Pinocchio model are not in pybullet's")
@@ -336,12 +340,21 @@ class Simulator:
         self._pushes = [push for push in self._pushes if push[3] > self._steps + 1]
 
     # ------------------------------------------------------------------ state
+    def _base_kinematics(self) -> tuple[tuple, tuple, tuple, tuple, tuple]:
+        """pybullet reads: (base pos, base quat, COM pos, COM linear vel, angular vel), world."""
+        cid = self.client
+        com_pos, com_quat = p.getBasePositionAndOrientation(self.body, physicsClientId=cid)
+        pos, quat = p.multiplyTransforms(com_pos, com_quat, *self._com_to_base,
+                                         physicsClientId=cid)
+        lin, ang = p.getBaseVelocity(self.body, physicsClientId=cid)
+        return pos, quat, com_pos, lin, ang
+
     def base_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Base (URDF root link) frame: position (3,) m and quaternion (4,) ``(x, y, z, w)``."""
         com_pos, com_quat = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
-        inv_pos, inv_quat = transform_inverse(self.robot.inertial_pos, self.robot.inertial_quat)
-        pos, quat = transform_multiply(np.array(com_pos), np.array(com_quat), inv_pos, inv_quat)
-        return pos, quat / np.linalg.norm(quat)
+        pos, quat = p.multiplyTransforms(com_pos, com_quat, *self._com_to_base,
+                                         physicsClientId=self.client)
+        return np.array(pos), np.array(quat)
 
     def link_pose_index(self, link: int) -> tuple[np.ndarray, np.ndarray]:
         """World pose of the URDF frame of pybullet link ``link`` (-1: base)."""
@@ -358,15 +371,16 @@ class Simulator:
         return self.link_pose_index(self.robot.link_index[name])
 
     def state(self) -> SimState:
-        """Ground-truth state now."""
-        pos, quat = self.base_pose()
-        com_pos = np.array(p.getBasePositionAndOrientation(self.body,
-                                                           physicsClientId=self.client)[0])
-        lin, ang = p.getBaseVelocity(self.body, physicsClientId=self.client)
-        omega = np.array(ang)
-        v_origin = np.array(lin) + np.cross(omega, pos - com_pos)
-        rot_t = quat_to_matrix(quat).T
-        v_lin, v_ang = rot_t @ v_origin, rot_t @ omega
+        """Ground-truth state now (cheap enough to call at the publishing rate)."""
+        pos_t, quat_t, com, lin, (wx, wy, wz) = self._base_kinematics()
+        pos, quat = np.array(pos_t), np.array(quat_t)
+        rot_t = np.array(p.getMatrixFromQuaternion(quat_t, physicsClientId=self.client))
+        rot_t = rot_t.reshape(3, 3).T
+        # velocity of the base origin = COM velocity + omega x (origin - COM), in the world
+        dx, dy, dz = pos_t[0] - com[0], pos_t[1] - com[1], pos_t[2] - com[2]
+        v_origin = (lin[0] + wy * dz - wz * dy, lin[1] + wz * dx - wx * dz,
+                    lin[2] + wx * dy - wy * dx)
+        v_lin, v_ang = rot_t @ v_origin, rot_t @ (wx, wy, wz)
         states = p.getJointStates(self.body, self._pb_joints, physicsClientId=self.client)
         qj = np.array([s[0] for s in states])
         vj = np.array([s[1] for s in states])

@@ -1,0 +1,322 @@
+"""``ros2 run horizon_mpc sim_node``: the pybullet simulator as a ROS 2 node.
+
+Topics, parameters, the lockstep protocol and the bad-input policy are documented in
+``doc/simulator.md``. In short:
+
+* publishes ``joint_states`` (sensor_msgs/JointState), ``odom`` (nav_msgs/Odometry, twist in
+  the base frame) and ``/clock``, stamped with sim time, every ``1 / state_rate`` sim seconds
+  (every ``control_period`` in lockstep mode);
+* follows ``joint_trajectory`` (trajectory_msgs/JointTrajectory), applies
+  ``external_wrench`` (geometry_msgs/WrenchStamped) pushes, offers ``~/reset``
+  (std_srvs/Trigger).
+
+The physics runs in chunks of whole state periods inside one callback (no rclpy call per
+physics step). :meth:`SimNode.step_once` advances one lockstep period on demand, so a test can
+drive the simulator and a controller deterministically in one process and one executor.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+
+from horizon_mpc.config import load_robot_config
+from horizon_mpc.nodes.conversions import (
+    NS_PER_S,
+    joint_state_to_msg,
+    joint_trajectory_from_msg,
+    odometry_to_msg,
+    time_from_ns,
+    time_to_ns,
+    vector3_from_msg,
+)
+from horizon_mpc.sim.simulator import Simulator
+
+__all__ = ["SimNode", "main"]
+
+_WARN_PERIOD = 2.0  # s (wall) between two warnings of the same kind
+_MAX_LAG = 0.25  # s (wall): further behind the wall clock than this, the pacing re-anchors
+
+
+def _range(lo: float, hi: float) -> list[FloatingPointRange]:
+    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+
+
+class SimNode(Node):
+    """The simulator node. Construct after ``rclpy.init()``; spin it with any executor."""
+
+    def __init__(
+        self,
+        node_name: str = "sim",
+        *,
+        parameter_overrides: Sequence[Parameter] | None = None,
+        **kwargs: object,
+    ) -> None:
+        super().__init__(node_name, parameter_overrides=list(parameter_overrides or []),
+                         **kwargs)
+        self._declare_parameters()
+        par = self._param
+        robot = par("config") or par("robot")
+        cfg = load_robot_config(robot)
+        physics_rate = par("physics_rate")
+        self.sim = Simulator(
+            cfg,
+            dt=1.0 / physics_rate,
+            urdf_path=par("urdf_path") or None,
+            kp=par("kp"),
+            kd=par("kd"),
+            friction=par("friction"),
+            base_pose=(par("initial_x"), par("initial_y"), par("initial_yaw")),
+            trajectory_timeout=par("trajectory_timeout"),
+            max_stamp_offset=par("max_stamp_offset"),
+        )
+        self.base_link = cfg.base_link if cfg.base_link in self.sim.robot.link_index \
+            else self.sim.robot.root_link
+        self._dt_ns = round(NS_PER_S / physics_rate)
+        self.realtime_factor = par("realtime_factor")
+        self.lockstep = par("lockstep")
+        self.lockstep_timeout = par("lockstep_timeout")
+        self.push_duration = par("push_duration")
+        self._steps_per_state = max(1, round(physics_rate / par("state_rate")))
+        self._steps_per_control = max(1, round(par("control_period") * physics_rate))
+
+        self.rejected_trajectories = 0
+        self.rejected_wrenches = 0
+        self._last_warn: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+
+        self._pub_joints = self.create_publisher(JointState, "joint_states", 10)
+        self._pub_odom = self.create_publisher(Odometry, "odom", 10)
+        self._pub_clock = self.create_publisher(Clock, "/clock", 10)
+        self._sub_trajectory = self.create_subscription(
+            JointTrajectory, "joint_trajectory", self._on_trajectory, 10)
+        self.create_subscription(WrenchStamped, "external_wrench", self._on_wrench, 10)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+
+        # lockstep bookkeeping: the stamp (ns) of the state awaiting an answer
+        self.awaiting_stamp_ns: int | None = None
+        self._started = not self.lockstep
+        self._deadline = self._wall_deadline()
+        # free-running pacing anchors (wall ns, sim ns)
+        self._anchor: tuple[int, int] | None = None
+        if self.lockstep:
+            self._timer = self.create_timer(0.005, self._on_lockstep_timer)
+        else:
+            period = 0.0 if self.realtime_factor <= 0 else \
+                self._steps_per_state * self.sim.dt / self.realtime_factor
+            self._timer = self.create_timer(period, self._on_free_timer)
+        self.get_logger().info(
+            f"simulating {cfg.name} ({self.sim.n_joints} joints, {self.sim.total_mass():.2f} kg) "
+            f"at {physics_rate:g} Hz, "
+            + ("lockstep" if self.lockstep else f"realtime factor {self.realtime_factor:g}")
+        )
+
+    # ------------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> None:
+        def declare(name: str, default: object, description: str,
+                    rng: list[FloatingPointRange] | None = None,
+                    irng: list[IntegerRange] | None = None) -> None:
+            desc = ParameterDescriptor(description=description)
+            if rng:
+                desc.floating_point_range = rng
+            if irng:
+                desc.integer_range = irng
+            self.declare_parameter(name, default, desc)
+
+        declare("robot", "go2", "robot config name (config/<robot>.yaml)")
+        declare("config", "", "path of a robot config YAML (overrides 'robot')")
+        declare("urdf_path", "", "URDF to simulate instead of the config's")
+        declare("physics_rate", 1000.0, "physics steps per sim second (Hz)", _range(50, 20000))
+        declare("state_rate", 500.0, "joint_states/odom/clock publish rate (Hz, sim time)",
+                _range(1, 20000))
+        declare("realtime_factor", 1.0,
+                "sim seconds per wall second; 0 = as fast as possible", _range(0, 1000))
+        declare("lockstep", False,
+                "advance one control_period per answered state (see doc/simulator.md)")
+        declare("lockstep_timeout", 1.0,
+                "wall seconds to wait for the answer to a state; 0 = wait forever",
+                _range(0, 3600))
+        declare("control_period", 0.01, "sim seconds advanced per lockstep step",
+                _range(1e-4, 10))
+        declare("kp", Parameter.Type.DOUBLE, "joint P gain (N m/rad); unset = config sim.kp",
+                _range(0, 1e6))
+        declare("kd", Parameter.Type.DOUBLE, "joint D gain (N m s/rad); unset = config sim.kd",
+                _range(0, 1e5))
+        declare("friction", Parameter.Type.DOUBLE,
+                "foot-ground friction coefficient; unset = config sim.lateral_friction",
+                _range(0, 10))
+        declare("initial_x", 0.0, "start base x (m)", _range(-1e3, 1e3))
+        declare("initial_y", 0.0, "start base y (m)", _range(-1e3, 1e3))
+        declare("initial_yaw", 0.0, "start base yaw (rad)", _range(-math.pi, math.pi))
+        declare("push_duration", 0.1, "duration of an external_wrench push (s)",
+                _range(1e-3, 60))
+        declare("trajectory_timeout", 0.5,
+                "a trajectory older than this (sim s) is stale: the robot holds", _range(1e-3, 1e3))
+        declare("max_stamp_offset", 1.0,
+                "trajectories stamped further than this from now (sim s) are rejected",
+                _range(1e-3, 1e3))
+
+    def _param(self, name: str) -> object:
+        try:
+            return self.get_parameter(name).value
+        except ParameterUninitializedException:
+            return None
+
+    # ------------------------------------------------------------------ time, publishing
+    @property
+    def now_ns(self) -> int:
+        """Sim time (exact integer ns): the stamp of a state published now."""
+        return self.sim.steps * self._dt_ns
+
+    def _publish_state(self, awaiting: bool = False) -> int:
+        stamp_ns = self.now_ns
+        stamp = time_from_ns(stamp_ns)
+        st = self.sim.state()
+        self._pub_clock.publish(Clock(clock=stamp))
+        self._pub_joints.publish(joint_state_to_msg(
+            stamp, self.sim.joint_names, st.joint_positions, st.joint_velocities, st.tau))
+        self._pub_odom.publish(odometry_to_msg(
+            stamp, st.base_position, st.base_quaternion, st.base_linear_velocity,
+            st.base_angular_velocity, frame_id="odom", child_frame_id=self.base_link))
+        if awaiting:
+            self.awaiting_stamp_ns = stamp_ns
+            self._deadline = self._wall_deadline()
+        return stamp_ns
+
+    def _wall_deadline(self) -> float:
+        return time.monotonic() + self.lockstep_timeout if self.lockstep_timeout > 0 else math.inf
+
+    def _warn(self, kind: str, text: str) -> None:
+        """A warning throttled per ``kind``; says how many were suppressed meanwhile."""
+        now = time.monotonic()
+        if now - self._last_warn.get(kind, -math.inf) < _WARN_PERIOD:
+            self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
+            return
+        n = self._suppressed.pop(kind, 0)
+        self._last_warn[kind] = now
+        more = f" ({n} similar warnings suppressed)" if n else ""
+        self.get_logger().warning(text + more)
+
+    # ------------------------------------------------------------------ stepping
+    def step_once(self) -> int:
+        """Advance one ``control_period`` of sim time and publish the state (lockstep step).
+
+        Returns the stamp (ns) of the published state; in lockstep mode the next step waits
+        for the answer to it.
+        """
+        self._started = True
+        self.sim.step(self._steps_per_control)
+        return self._publish_state(awaiting=self.lockstep)
+
+    @property
+    def peers_ready(self) -> bool:
+        """Whether a ``joint_states`` subscriber and a ``joint_trajectory`` publisher exist."""
+        return (self._pub_joints.get_subscription_count() > 0
+                and self._sub_trajectory.get_publisher_count() > 0)
+
+    def _on_lockstep_timer(self) -> None:
+        if not self._started:  # the first state goes out once the controller is connected
+            if self.peers_ready or time.monotonic() > self._deadline:
+                if not self.peers_ready:
+                    self.get_logger().warning(
+                        "lockstep: no controller connected (joint_states subscriber and "
+                        "joint_trajectory publisher) after lockstep_timeout; starting anyway")
+                self._started = True
+                self._publish_state(awaiting=True)
+            return
+        if self.awaiting_stamp_ns is not None and time.monotonic() > self._deadline:
+            self._warn("lockstep", f"no joint_trajectory answered the state stamped "
+                       f"{self.awaiting_stamp_ns / NS_PER_S:.3f} s within "
+                       f"{self.lockstep_timeout:g} s (wall); continuing with the last command")
+            self.step_once()
+
+    def _on_free_timer(self) -> None:
+        chunk = self._steps_per_state
+        if self.realtime_factor <= 0:
+            self.sim.step(chunk)
+            self._publish_state()
+            return
+        wall = time.monotonic_ns()
+        if self._anchor is None:
+            self._anchor = (wall, self.now_ns)
+        target = self._anchor[1] + (wall - self._anchor[0]) * self.realtime_factor
+        behind = (target - self.now_ns) / NS_PER_S
+        if behind > _MAX_LAG * max(1.0, self.realtime_factor):
+            self._warn("lag", f"the simulation runs {behind:.2f} s behind realtime factor "
+                       f"{self.realtime_factor:g}; dropping the backlog")
+            self._anchor = (wall, self.now_ns)
+            target = self.now_ns + chunk * self._dt_ns
+        while self.now_ns + chunk * self._dt_ns <= target:
+            self.sim.step(chunk)
+            self._publish_state()
+
+    # ------------------------------------------------------------------ inputs
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        stamp_ns = time_to_ns(msg.header.stamp)
+        try:
+            cmd = joint_trajectory_from_msg(msg, self.sim.time)
+            self.sim.set_trajectory(cmd)
+        except ValueError as exc:
+            self.rejected_trajectories += 1
+            self._warn("trajectory", f"rejected joint_trajectory: {exc}; keeping the last "
+                       "good command")
+        if self.lockstep and self.awaiting_stamp_ns is not None and (
+            stamp_ns == self.awaiting_stamp_ns or stamp_ns == 0
+        ):
+            self.awaiting_stamp_ns = None
+            self.step_once()
+
+    def _on_wrench(self, msg: WrenchStamped) -> None:
+        link = msg.header.frame_id or self.base_link
+        try:
+            self.sim.push(link, vector3_from_msg(msg.wrench.force),
+                          vector3_from_msg(msg.wrench.torque), self.push_duration)
+        except ValueError as exc:
+            self.rejected_wrenches += 1
+            self._warn("wrench", f"rejected external_wrench: {exc}")
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self.sim.reset(reset_time=False)
+        response.success = True
+        response.message = f"reset to the standing start at t = {self.sim.time:.3f} s"
+        self.get_logger().info(response.message)
+        return response
+
+    def destroy_node(self) -> None:
+        """Destroy the node and close the physics client."""
+        self.sim.close()
+        super().destroy_node()
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of ``ros2 run horizon_mpc sim_node``; exit code 0 on SIGINT/SIGTERM."""
+    rclpy.init(args=args)
+    node: SimNode | None = None
+    try:
+        node = SimNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
