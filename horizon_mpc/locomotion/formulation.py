@@ -1,0 +1,115 @@
+"""Building blocks of the seed's whole-body formulation on the Problem API.
+
+State ``x = [q, v]`` (configuration with quaternion, generalised velocity), input
+``u = [a, f]`` (generalised acceleration, contact forces in world axes, 3 per foot).
+Conventions: ``doc/model.md``; node conventions: ``doc/problem.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as cs
+import numpy as np
+
+from horizon_mpc.model import RobotModel
+from horizon_mpc.problem import Constraint, Cost, Problem
+
+__all__ = [
+    "ContactTerms",
+    "add_contacts",
+    "add_torque_limits",
+    "base_rotation",
+    "floating_base_double_integrator",
+]
+
+
+def floating_base_double_integrator(model: RobotModel, q, v, a) -> cs.SX:
+    """Double-integrator dynamics on the configuration manifold: ``q' = v``, ``v' = a``.
+
+    Declares ``q``'s manifold (Lie-group integrate/difference of the model) so that every
+    integrator keeps the quaternion unit norm. Returns the tangent derivative ``[v; a]``.
+    """
+    q.set_manifold(model.integrate(), model.difference(), model.nv)
+    return cs.vertcat(v, a)
+
+
+def base_rotation(q) -> cs.SX:
+    """World-from-base rotation matrix of a free-flyer configuration (quaternion x, y, z, w)."""
+    x, y, z, w = q[3], q[4], q[5], q[6]
+    return cs.vertcat(
+        cs.horzcat(1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
+        cs.horzcat(2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)),
+        cs.horzcat(2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)),
+    )
+
+
+@dataclass
+class ContactTerms:
+    """The per-foot constraints/costs created by :func:`add_contacts`, by foot name."""
+
+    velocity: dict[str, Constraint] = field(default_factory=dict)
+    friction: dict[str, Constraint] = field(default_factory=dict)
+    zero_force: dict[str, Constraint] = field(default_factory=dict)
+    clearance: dict[str, Constraint | Cost] = field(default_factory=dict)
+    swing_z: object = None  # the swing height Parameter (n_feet)
+
+    def set_schedule(self, stance: np.ndarray, swing_z: np.ndarray | None = None) -> None:
+        """Activate stance/swing terms per node from ``stance`` (n_feet, N+1) booleans.
+
+        ``swing_z``: world height of each swinging foot per node (n_feet, N+1).
+        """
+        for i, foot in enumerate(self.velocity):
+            st = np.asarray(stance[i], bool)
+            n_last = st.size - 1
+            self.velocity[foot].set_nodes(np.flatnonzero(st))
+            self.friction[foot].set_nodes(np.flatnonzero(st[:n_last]))
+            self.zero_force[foot].set_nodes(np.flatnonzero(~st[:n_last]))
+            if foot in self.clearance:
+                self.clearance[foot].set_nodes(np.flatnonzero(~st))
+        if swing_z is not None and self.swing_z is not None:
+            self.swing_z.assign(swing_z)
+
+
+def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q, v, f, mu: float,
+                 clearance: str | None = "constraint", clearance_weight: float = 1e3,
+                 ) -> ContactTerms:
+    """Contact constraints of each foot, to be switched per node by a schedule.
+
+    Stance (node k): foot velocity zero (world axes, 3 rows); force inside the linearised
+    friction cone ``|f_x|, |f_y| <= mu f_z`` and ``f_z >= 0`` (5 rows, stage nodes).
+    Swing: force zero (3 rows); clearance: the foot height follows the parameter
+    ``swing_z`` (a constraint, a cost of weight ``clearance_weight``, or None).
+    All terms start active on every node; call ``ContactTerms.set_schedule``.
+    """
+    terms = ContactTerms()
+    if clearance not in (None, "constraint", "cost"):
+        raise ValueError(f"clearance must be 'constraint', 'cost' or None, got {clearance!r}")
+    swing_z = prb.create_parameter("swing_z", len(feet)) if clearance else None
+    terms.swing_z = swing_z
+    cone = np.array([[1.0, 0.0, mu], [-1.0, 0.0, mu], [0.0, 1.0, mu], [0.0, -1.0, mu],
+                     [0.0, 0.0, 1.0]])
+    for i, foot in enumerate(feet):
+        fi = f[3 * i:3 * i + 3]
+        lin, _ = model.frame_velocity(foot, ref="LOCAL_WORLD_ALIGNED")(q, v)
+        terms.velocity[foot] = prb.create_constraint(f"{foot}_velocity", lin)
+        terms.friction[foot] = prb.create_constraint(
+            f"{foot}_friction", cs.mtimes(cs.DM(cone), fi), bounds=(0.0, np.inf))
+        terms.zero_force[foot] = prb.create_constraint(f"{foot}_no_force", fi)
+        if clearance:
+            pos, _ = model.fk(foot)(q)
+            res = pos[2] - swing_z[i]
+            if clearance == "constraint":
+                terms.clearance[foot] = prb.create_constraint(f"{foot}_clearance", res)
+            else:
+                terms.clearance[foot] = prb.create_cost(f"{foot}_clearance", res,
+                                                        weight=clearance_weight)
+    return terms
+
+
+def add_torque_limits(prb: Problem, model: RobotModel, tau_joints, scale: float = 1.0) -> Constraint:
+    """Joint torques (from inverse dynamics) within ``scale`` times the URDF effort limits."""
+    lim = scale * model.joint_effort_limit
+    lim = np.where(np.isfinite(lim), lim, np.inf)
+    return prb.create_constraint("torque_limits", tau_joints, bounds=(-lim, lim),
+                                 nodes=range(prb.n_nodes))

@@ -1,0 +1,106 @@
+"""Gaits and contact schedules.
+
+A gait is periodic: foot ``i`` is in stance while its phase ``(t / period + offset_i) mod 1``
+is below the duty factor. ``period = step_duration / (1 - duty_factor)`` so that
+``step_duration`` is the duration of one swing. Offsets are given per foot position in
+the order ``[front-left, front-right, hind-left, hind-right]`` (the order of ``feet`` in
+every robot config). Sampling a gait at ``t0 + k dt`` gives the schedule of a receding
+horizon that starts at ``t0``; shifting the horizon is sampling at a later ``t0``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["GAITS", "ContactSchedule", "Gait", "make_gait", "swing_height_profile"]
+
+
+@dataclass(frozen=True)
+class Gait:
+    """A periodic gait (see the module docstring)."""
+
+    name: str
+    offsets: tuple[float, ...]
+    duty_factor: float
+    step_duration: float
+    step_height: float
+
+    @property
+    def period(self) -> float:
+        """Duration of one gait cycle (s)."""
+        return self.step_duration / (1.0 - self.duty_factor) if self.duty_factor < 1 else np.inf
+
+    def phases(self, t: np.ndarray) -> np.ndarray:
+        """Phase in [0, 1) of each foot at times ``t``: shape (n_feet, len(t))."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        if not np.isfinite(self.period):
+            return np.zeros((len(self.offsets), t.size))
+        return np.mod(t[None, :] / self.period + np.asarray(self.offsets)[:, None], 1.0)
+
+    def schedule(self, t0: float, n_nodes: int, dt: float) -> ContactSchedule:
+        """Contacts and swing progress on nodes ``t0 + k dt``, k = 0..n_nodes."""
+        t = t0 + dt * np.arange(n_nodes + 1)
+        ph = self.phases(t)
+        stance = ph < self.duty_factor if self.duty_factor < 1 else np.ones_like(ph, bool)
+        swing_progress = np.where(stance, 0.0,
+                                  (ph - self.duty_factor) / max(1.0 - self.duty_factor, 1e-9))
+        return ContactSchedule(stance, swing_progress, self.step_height)
+
+
+@dataclass
+class ContactSchedule:
+    """Per foot and node: stance flags (n_feet, N+1) and swing progress in [0, 1)."""
+
+    stance: np.ndarray
+    swing_progress: np.ndarray
+    step_height: float
+
+    def swing_height(self) -> np.ndarray:
+        """Foot height above the ground on each node (0 in stance), shape (n_feet, N+1)."""
+        return np.where(self.stance, 0.0,
+                        swing_height_profile(self.swing_progress, self.step_height))
+
+    def count_swings(self) -> np.ndarray:
+        """Number of swing phases per foot in the schedule, shape (n_feet,)."""
+        sw = ~self.stance
+        starts = sw[:, 1:] & ~sw[:, :-1]
+        return starts.sum(axis=1) + sw[:, 0]
+
+
+def swing_height_profile(s: np.ndarray, height: float) -> np.ndarray:
+    """Height ``16 h s^2 (1 - s)^2``: 0 with zero velocity at lift-off and touch-down, h at s=1/2."""
+    s = np.clip(s, 0.0, 1.0)
+    return 16.0 * height * s * s * (1.0 - s) ** 2
+
+
+# name -> (offsets [FL, FR, HL, HR], duty factor)
+GAITS: dict[str, tuple[tuple[float, ...], float]] = {
+    "stand": ((0.0, 0.0, 0.0, 0.0), 1.0),
+    "trot": ((0.0, 0.5, 0.5, 0.0), 0.5),
+    "walk": ((0.0, 0.5, 0.75, 0.25), 0.75),
+    "pace": ((0.0, 0.5, 0.0, 0.5), 0.5),
+    "bound": ((0.0, 0.0, 0.5, 0.5), 0.5),
+    "pronk": ((0.0, 0.0, 0.0, 0.0), 0.5),
+}
+
+
+def make_gait(name: str, step_duration: float = 0.3, step_height: float = 0.08,
+              duty_factor: float | None = None, n_feet: int = 4) -> Gait:
+    """A gait from the library (``stand``, ``trot``, ``walk``, ``pace``, ``bound``, ``pronk``).
+
+    Raises:
+        ValueError: unknown name, non-positive duration, duty factor outside (0, 1].
+    """
+    if name not in GAITS:
+        raise ValueError(f"unknown gait {name!r}; gaits are: {', '.join(GAITS)}")
+    offsets, beta = GAITS[name]
+    beta = beta if duty_factor is None or name == "stand" else float(duty_factor)
+    if not 0.0 < beta <= 1.0:
+        raise ValueError(f"duty factor must be in (0, 1], got {beta}")
+    if step_duration <= 0:
+        raise ValueError(f"step_duration must be > 0, got {step_duration}")
+    if n_feet != 4:
+        offsets = tuple(offsets[i % 4] for i in range(n_feet))
+    return Gait(name, tuple(offsets), beta, float(step_duration), float(step_height))

@@ -1,0 +1,80 @@
+"""Settings of the walking problem: the ``mpc:`` section of ``config/<robot>.yaml``.
+
+Every field has a default that suits a ~15 kg quadruped; robot configs override what
+they need. Weights multiply squared residuals (SI units: m, rad, m/s, rad/s, N).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+__all__ = ["GaitSettings", "MpcSettings", "Weights"]
+
+
+@dataclass
+class GaitSettings:
+    """Gait of the walking MPC (see :mod:`horizon_mpc.locomotion.gaits`)."""
+
+    name: str = "trot"
+    step_duration: float = 0.3
+    duty_factor: float = 0.5
+    step_height: float = 0.07
+
+
+@dataclass
+class Weights:
+    """Cost weights (per residual row where a list is given)."""
+
+    base_linear_velocity: list[float] = field(default_factory=lambda: [20.0, 20.0, 10.0])
+    base_angular_velocity: list[float] = field(default_factory=lambda: [2.0, 2.0, 10.0])
+    base_height: float = 100.0
+    base_orientation: float = 100.0
+    base_position: float = 2.0
+    base_yaw: float = 5.0
+    posture: float = 1.0
+    joint_velocity: float = 0.05
+    acceleration: float = 1e-3
+    force: float = 1e-5
+    swing_height: float = 500.0
+    final_posture: float = 5.0
+
+
+@dataclass
+class MpcSettings:
+    """Horizon, gait, weights and limits of the walking MPC."""
+
+    n_nodes: int = 40
+    dt: float = 0.02
+    friction: float | None = None  # None: the robot config's friction
+    base_height: float | None = None  # None: the nominal standing height
+    gait: GaitSettings = field(default_factory=GaitSettings)
+    weights: Weights = field(default_factory=Weights)
+    clearance: str = "cost"  # 'cost', 'constraint' or 'none'
+    torque_limits: bool = True
+    max_velocity: list[float] = field(default_factory=lambda: [1.0, 0.5, 1.0])  # vx, vy, wz
+    max_acceleration: list[float] = field(default_factory=lambda: [1.0, 1.0, 2.0])
+    stand_when_idle: bool = True
+    rho_init: float = 100.0
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any] | None) -> MpcSettings:
+        """Settings from a YAML mapping; unknown keys raise ``ValueError`` naming them."""
+        data = dict(data or {})
+        _check(data, cls, "mpc")
+        gait = GaitSettings(**_checked(data.pop("gait", {}), GaitSettings, "mpc.gait"))
+        weights = Weights(**_checked(data.pop("weights", {}), Weights, "mpc.weights"))
+        return cls(gait=gait, weights=weights, **data)
+
+
+def _check(data: dict, cls: type, where: str) -> None:
+    names = {f.name for f in fields(cls)}
+    unknown = set(data) - names
+    if unknown:
+        raise ValueError(f"unknown key(s) {sorted(unknown)} in '{where}'; known: {sorted(names)}")
+
+
+def _checked(data: dict | None, cls: type, where: str) -> dict:
+    data = dict(data or {})
+    _check(data, cls, where)
+    return data
