@@ -80,7 +80,8 @@ $(DEPS_STAMP): | $(VPY)
 # `<venv>/share/ament_index/.../horizon_mpc` and `<venv>/lib/horizon_mpc/<exe>` exist.
 $(DATA_STAMP): $(DEPS_STAMP) setup.py $(DATA_FILES)
 	@echo "==> Installing the ament index marker, package.xml, configs and launchers into $(VENV)"
-	$(VPY) setup.py --quiet install_data --install-dir $(VENV_ABS) --force
+	$(VPY) -W "ignore:setup.py install is deprecated" setup.py --quiet \
+		install_data --install-dir $(VENV_ABS) --force
 	@touch $@
 
 demo: setup
