@@ -1,0 +1,168 @@
+"""Compile any ``casadi.Function`` to C, with an on-disk cache shared by all processes.
+
+``compile_function(fn)`` generates C for ``fn`` (``casadi.CodeGenerator``), builds a shared
+library with ``gcc -shared -fPIC`` and loads it with ``casadi.external``. The result has the
+same name, inputs and outputs as ``fn`` and returns the same numbers. It evaluates numerically
+and on MX, not on SX (an external function has no SX graph).
+
+Cache: ``$HORIZON_MPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/horizon_mpc``, else
+``~/.cache/horizon_mpc``. A library is keyed by a hash of ``fn.serialize()``, the compiler
+command and the CasADi version, so a changed function never loads a stale library. Libraries
+are written under a temporary name and renamed into place: concurrent processes may compile
+the same function, the last rename wins and every reader sees a complete file.
+
+Set ``HORIZON_MPC_NO_CODEGEN=1`` to get ``fn`` back unchanged (debugging, or no compiler).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+
+__all__ = [
+    "STATS",
+    "CompileStats",
+    "codegen_enabled",
+    "compile_function",
+    "default_cache_dir",
+    "forget_loaded",
+]
+
+_log = logging.getLogger(__name__)
+
+CC = os.environ.get("CC", "gcc")
+# Optimisation level by size of the generated C: gcc's time grows superlinearly with -O3 on
+# multi-megabyte straight-line code, while -O1 keeps most of the runtime speed there.
+_OPT_BY_SIZE = ((1_000_000, "-O3"), (4_000_000, "-O2"))
+_OPT_LARGE = "-O1"
+_FLAGS = ("-shared", "-fPIC")
+_POLICY = f"{_OPT_BY_SIZE}|{_OPT_LARGE}|{_FLAGS}|v1"
+
+
+@dataclass
+class CompileStats:
+    """Process-wide counters (tests use them to tell a cache hit from a compilation)."""
+
+    compiled: int = 0  # gcc runs
+    loaded: int = 0  # libraries loaded from the disk cache
+    memory_hits: int = 0  # already loaded in this process
+
+
+STATS = CompileStats()
+_LOADED: dict[str, ca.Function] = {}
+
+
+def codegen_enabled() -> bool:
+    """False when ``HORIZON_MPC_NO_CODEGEN`` is set to a true value (1, true, yes)."""
+    return os.environ.get("HORIZON_MPC_NO_CODEGEN", "").strip().lower() not in ("1", "true", "yes")
+
+
+def default_cache_dir() -> Path:
+    """The cache directory (see the module docstring); not created here."""
+    env = os.environ.get("HORIZON_MPC_CACHE_DIR")
+    if env:
+        return Path(env).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
+    return base / "horizon_mpc"
+
+
+def _opt_flag(c_size: int) -> str:
+    for limit, flag in _OPT_BY_SIZE:
+        if c_size < limit:
+            return flag
+    return _OPT_LARGE
+
+
+def _renamed(fn: ca.Function, name: str) -> ca.Function:
+    if fn.name() == name:
+        return fn
+    if fn.is_a("SXFunction"):
+        args = fn.sx_in()
+    else:
+        args = fn.mx_in()
+    return ca.Function(name, args, fn.call(args), fn.name_in(), fn.name_out())
+
+
+def _key(fn: ca.Function) -> str:
+    h = hashlib.sha256()
+    for part in (fn.serialize(), _POLICY, CC, ca.__version__):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()[:24]
+
+
+def compile_function(
+    fn: ca.Function, name: str | None = None, cache_dir: str | Path | None = None
+) -> ca.Function:
+    """Compiled twin of ``fn`` (same signature), from the cache when possible.
+
+    Args:
+        fn: any CasADi Function without free variables (SX, MX, mapped, ...).
+        name: name of the compiled function (a C identifier); default ``fn.name()``.
+        cache_dir: where libraries are kept; default :func:`default_cache_dir`.
+
+    Returns:
+        a ``casadi.Function`` backed by the shared library, or ``fn`` itself when
+        ``HORIZON_MPC_NO_CODEGEN=1``.
+
+    Raises:
+        RuntimeError: the C compiler failed (the message holds the end of its output).
+    """
+    if not codegen_enabled():
+        return fn
+    fn = _renamed(fn, name or fn.name())
+    folder = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
+    lib = folder / f"{fn.name()}_{_key(fn)}.so"
+    if str(lib) in _LOADED:
+        STATS.memory_hits += 1
+        return _LOADED[str(lib)]
+    folder.mkdir(parents=True, exist_ok=True)
+    if lib.is_file():
+        _log.debug("loading %s from the cache (%s)", fn.name(), lib)
+        STATS.loaded += 1
+    else:
+        _build(fn, lib)
+    compiled = ca.external(fn.name(), str(lib))
+    _LOADED[str(lib)] = compiled
+    return compiled
+
+
+def forget_loaded() -> None:
+    """Drop the in-process table of loaded libraries (the next call reads the disk cache)."""
+    _LOADED.clear()
+
+
+def _build(fn: ca.Function, lib: Path) -> None:
+    work = Path(tempfile.mkdtemp(prefix=".build_", dir=lib.parent))
+    try:
+        c_name = f"{fn.name()}.c"
+        gen = ca.CodeGenerator(c_name, {"with_header": False})
+        gen.add(fn)
+        gen.generate(str(work) + os.sep)
+        c_file = work / c_name
+        size = c_file.stat().st_size
+        opt = _opt_flag(size)
+        _log.info("compiling %s (%d kB of C, %s)...", fn.name(), size // 1000, opt)
+        start = time.perf_counter()
+        tmp_lib = work / lib.name
+        cmd = [CC, opt, *_FLAGS, str(c_file), "-o", str(tmp_lib), "-lm"]
+        res = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if res.returncode != 0:
+            raise RuntimeError(
+                f"compiling {fn.name()} failed ({' '.join(cmd)}):\n{res.stderr[-2000:]}"
+            )
+        os.replace(tmp_lib, lib)  # atomic within one file system
+        STATS.compiled += 1
+        _log.info("compiled %s in %.1f s -> %s", fn.name(), time.perf_counter() - start, lib)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)

@@ -1,0 +1,138 @@
+"""compile_function: same numbers as the VM, on-disk cache, opt-out switch."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+from model_reference import evaluate, model, random_states
+
+from horizon_mpc import codegen
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("HORIZON_MPC_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("HORIZON_MPC_NO_CODEGEN", raising=False)
+    return tmp_path
+
+
+def _small_function() -> ca.Function:
+    x = ca.SX.sym("x", 3)
+    p = ca.SX.sym("p")
+    return ca.Function("small", [x, p], [ca.sin(x) * p, ca.sumsqr(x)], ["x", "p"], ["y", "n"])
+
+
+def test_compiled_forward_kinematics_returns_what_the_vm_does(cache):
+    m = model("go2")
+    fn = m.frame_velocity("FL_foot", "WORLD")
+    fast = m.compile(fn)
+    s = random_states(m, n=20)
+    for vm_out, c_out in zip(
+        evaluate(fn, s["q"], s["v"]), evaluate(fast, s["q"], s["v"]), strict=True
+    ):
+        assert np.allclose(c_out, vm_out, rtol=1e-12, atol=1e-12)
+
+
+def test_compiled_function_keeps_name_and_signature(cache):
+    fn = _small_function()
+    fast = codegen.compile_function(fn)
+    assert fast.name() == "small"
+    assert fast.name_in() == ["x", "p"] and fast.name_out() == ["y", "n"]
+    assert fast.size_out(0) == (3, 1)
+
+
+def test_compiled_function_can_be_renamed(cache):
+    fast = codegen.compile_function(_small_function(), name="small_renamed")
+    assert fast.name() == "small_renamed"
+    assert float(fast(np.ones(3), 2.0)[1]) == 3.0
+
+
+def test_mapped_functions_compile(cache):
+    fn = _small_function().map(7, "serial")
+    fast = codegen.compile_function(fn)
+    x = np.arange(21.0).reshape(3, 7)
+    p = np.linspace(0, 1, 7).reshape(1, 7)
+    for vm_out, c_out in zip(fn(x, p), fast(x, p), strict=True):
+        assert np.allclose(c_out.full(), vm_out.full(), rtol=1e-12, atol=0)
+
+
+def test_library_is_cached_on_disk_and_reused(cache):
+    fn = _small_function()
+    codegen.compile_function(fn)
+    compiled, loaded = codegen.STATS.compiled, codegen.STATS.loaded
+    codegen.forget_loaded()  # as if in a new process
+    codegen.compile_function(fn)
+    assert codegen.STATS.compiled == compiled  # no gcc run
+    assert codegen.STATS.loaded == loaded + 1
+    assert len(list(cache.glob("small_*.so"))) == 1
+    assert not list(cache.glob(".build_*"))  # temporary build folders are removed
+
+
+def test_changed_function_gets_a_new_library(cache):
+    codegen.compile_function(_small_function())
+    x = ca.SX.sym("x", 3)
+    p = ca.SX.sym("p")
+    other = ca.Function("small", [x, p], [ca.cos(x) * p, ca.sumsqr(x)], ["x", "p"], ["y", "n"])
+    fast = codegen.compile_function(other)
+    assert np.allclose(fast(np.zeros(3), 1.0)[0].full().ravel(), 1.0)
+    assert len(list(cache.glob("small_*.so"))) == 2
+
+
+def test_no_codegen_switch_returns_the_vm_function(cache, monkeypatch):
+    monkeypatch.setenv("HORIZON_MPC_NO_CODEGEN", "1")
+    fn = _small_function()
+    assert codegen.compile_function(fn) is fn
+    assert not list(cache.iterdir())
+
+
+def test_default_cache_dir_follows_xdg(monkeypatch, tmp_path):
+    monkeypatch.delenv("HORIZON_MPC_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert codegen.default_cache_dir() == tmp_path / "horizon_mpc"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    assert codegen.default_cache_dir() == Path.home() / ".cache" / "horizon_mpc"
+
+
+def test_compiler_errors_are_reported(cache, monkeypatch):
+    monkeypatch.setattr(codegen, "CC", "false")  # a "compiler" that always fails
+    x = ca.SX.sym("x")
+    with pytest.raises(RuntimeError, match="compiling broken failed"):
+        codegen.compile_function(ca.Function("broken", [x], [x * 3]))
+
+
+_SCRIPT = textwrap.dedent(
+    """
+    import logging, sys
+    logging.basicConfig(level=logging.INFO, stream=sys.stdout, format="%(message)s")
+    from horizon_mpc import codegen
+    from horizon_mpc.model import RobotModel
+    m = RobotModel.from_example("solo12")
+    fast = m.compile(m.fk("FL_FOOT"))
+    print("compiled", codegen.STATS.compiled, "loaded", codegen.STATS.loaded)
+    """
+)
+
+
+@pytest.mark.slow
+def test_second_process_loads_from_the_warm_cache(cache):
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(
+            [str(Path(__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
+        ),
+    )
+    runs = [
+        subprocess.run(
+            [sys.executable, "-c", _SCRIPT], capture_output=True, text=True, env=env, check=True
+        ).stdout
+        for _ in range(2)
+    ]
+    assert "compiling fk_FL_FOOT" in runs[0] and "compiled 1 loaded 0" in runs[0]
+    assert "compiling" not in runs[1] and "compiled 0 loaded 1" in runs[1]

@@ -1,0 +1,163 @@
+"""RobotModel's construction, information attributes, caching and error messages."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+import pytest
+from model_reference import centauro_wheels_urdf, model
+
+from horizon_mpc.model import RobotModel, UnknownNameError
+from horizon_mpc.robots import example_robot_files
+
+GO2_JOINTS = [
+    f"{leg}_{part}_joint" for leg in ("FL", "FR", "RL", "RR") for part in ("hip", "thigh", "calf")
+]
+
+
+def test_go2_sizes_mass_and_joint_order():
+    m = model("go2")
+    assert (m.nq, m.nv) == (19, 18)
+    assert m.floating_base
+    assert m.joint_names == GO2_JOINTS
+    assert m.mass == pytest.approx(pin.computeTotalMass(m.pin_model))
+    assert m.joint_idx_q["FL_hip_joint"] == 7 and m.joint_idx_v["FL_hip_joint"] == 6
+
+
+def test_from_urdf_path_and_string_give_the_same_model():
+    path = example_robot_files("solo12").urdf
+    from_path = RobotModel.from_urdf(path)
+    from_text = RobotModel.from_urdf(path.read_text())
+    assert from_path.joint_names == from_text.joint_names
+    assert from_path.frame_names == from_text.frame_names
+    q = from_path.neutral()
+    assert np.array_equal(from_path.com()(q).full(), from_text.com()(q).full())
+
+
+def test_arms_are_fixed_base_by_default():
+    for name, n_joints in (("ur5", 6), ("panda", 9)):
+        m = model(name)
+        assert not m.floating_base
+        assert m.nq == m.nv == n_joints
+
+
+def test_limits_come_from_the_urdf_and_base_is_unbounded():
+    m = model("go2")
+    pm = m.pin_model
+    assert np.all(np.isinf(m.q_lower[:7])) and np.all(np.isinf(m.q_upper[:7]))
+    assert np.array_equal(m.q_lower[7:], pm.lowerPositionLimit[7:])
+    assert np.array_equal(m.joint_position_upper, pm.upperPositionLimit[7:])
+    assert np.array_equal(m.joint_velocity_limit, pm.velocityLimit[6:])
+    assert np.array_equal(m.joint_effort_limit, pm.effortLimit[6:])
+    assert np.all(np.isinf(m.v_limit[:6])) and np.all(np.isinf(m.effort_limit[:6]))
+    assert m.joint_position_lower.shape == (12,)
+
+
+def test_continuous_joints_take_cos_sin_and_are_unbounded():
+    m = model("centauro_wheels")
+    assert m.nq == m.nv + 1 + 4  # quaternion + four wheels
+    iq = m.joint_idx_q["j_wheel_1"]
+    assert np.array_equal(m.neutral()[iq : iq + 2], [1.0, 0.0])
+    k = m.joint_names.index("j_wheel_1")
+    assert np.isinf(m.joint_position_lower[k]) and np.isinf(m.joint_position_upper[k])
+
+
+def test_reference_configuration_reads_the_srdf_posture():
+    m = model("go2")
+    q = m.reference_configuration("standing")
+    assert np.array_equal(q[:7], [0, 0, 0, 0, 0, 0, 1])
+    assert q[m.joint_idx_q["FL_thigh_joint"]] == 0.785
+    assert "standing" in m.reference_configuration_names()
+
+
+def test_reference_configuration_can_keep_the_srdf_base_placement():
+    q = model("go2").reference_configuration("standing", with_base=True)
+    assert np.array_equal(q[:7], [0, 0, 0.335, 0, 0, 0, 1])
+
+
+def test_reference_configuration_of_continuous_joints_is_cos_sin(tmp_path):
+    srdf = tmp_path / "wheels.srdf"
+    srdf.write_text(
+        '<robot name="c"><group_state name="turned" group="g">'
+        '<joint name="j_wheel_1" value="0.5"/></group_state></robot>'
+    )
+    m = RobotModel.from_urdf(centauro_wheels_urdf(), srdf=srdf)
+    q = m.reference_configuration("turned")
+    iq = m.joint_idx_q["j_wheel_1"]
+    assert np.allclose(q[iq : iq + 2], [np.cos(0.5), np.sin(0.5)])
+
+
+def test_functions_are_cached_per_kind_frame_and_ref():
+    m = model("go2")
+    assert m.fk("FL_foot") is m.fk("FL_foot")
+    assert m.jacobian("FL_foot", "WORLD") is m.jacobian("FL_foot", "WORLD")
+    assert m.jacobian("FL_foot", "WORLD") is not m.jacobian("FL_foot", "LOCAL")
+    assert m.inverse_dynamics(["FL_foot"]) is m.inverse_dynamics(["FL_foot"])
+
+
+def test_functions_have_named_inputs_and_outputs():
+    m = model("go2")
+    fn = m.inverse_dynamics(["FL_foot", "FR_foot"])
+    assert fn.name_in() == ["q", "v", "a", "f"] and fn.name_out() == ["tau"]
+    assert fn.size_in(3) == (6, 1)
+    assert m.frame_velocity("FL_foot").name_out() == ["lin", "ang"]
+    assert m.forward_dynamics().name_in() == ["q", "v", "tau", "f"]
+
+
+@pytest.mark.parametrize("sym", [ca.SX, ca.MX])
+def test_functions_accept_symbols(sym):
+    m = model("go2")
+    q, v = sym.sym("q", m.nq), sym.sym("v", m.nv)
+    lin, _ = m.frame_velocity("FL_foot")(q, v)
+    assert isinstance(lin, sym) and lin.shape == (3, 1)
+
+
+def test_pinocchio_reference_frame_enums_are_accepted():
+    m = model("go2")
+    assert m.jacobian("FL_foot", pin.ReferenceFrame.LOCAL) is m.jacobian("FL_foot", "LOCAL")
+
+
+def test_unknown_frame_names_the_frame_and_lists_valid_ones():
+    m = model("go2")
+    with pytest.raises(UnknownNameError, match=r"unknown frame 'FL_fot'.*FL_foot"):
+        m.fk("FL_fot")
+    with pytest.raises(KeyError, match="RR_fot"):
+        m.inverse_dynamics(["FL_foot", "RR_fot"])
+
+
+def test_unknown_reference_frame_is_rejected():
+    with pytest.raises(ValueError, match=r"unknown reference frame 'GLOBAL'.*LOCAL_WORLD_ALIGNED"):
+        model("go2").jacobian("FL_foot", "GLOBAL")
+
+
+def test_unknown_robot_lists_the_known_ones():
+    with pytest.raises(KeyError, match=r"unknown robot 'go3'.*go2"):
+        RobotModel.from_example("go3")
+
+
+def test_missing_urdf_file_is_reported(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nope.urdf"):
+        RobotModel.from_urdf(tmp_path / "nope.urdf")
+
+
+def test_malformed_urdf_is_reported():
+    with pytest.raises(ValueError, match="malformed URDF"):
+        RobotModel.from_urdf('<robot name="x"><link name="a"></robot>')
+
+
+def test_unknown_reference_configuration_lists_the_available_ones():
+    with pytest.raises(UnknownNameError, match=r"'sitting'.*standing"):
+        model("go2").reference_configuration("sitting")
+
+
+def test_unsupported_joint_type_is_rejected():
+    urdf = (
+        '<robot name="r"><link name="a"><inertial><mass value="1"/>'
+        '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>'
+        '<link name="b"><inertial><mass value="1"/>'
+        '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>'
+        '<joint name="j" type="planar"><parent link="a"/><child link="b"/></joint></robot>'
+    )
+    with pytest.raises(NotImplementedError, match="not supported"):
+        RobotModel.from_urdf(urdf, floating_base=False)
