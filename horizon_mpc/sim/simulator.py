@@ -261,6 +261,8 @@ class Simulator:
         for j, pb in enumerate(self._pb_joints):
             p.resetJointState(self.body, pb, float(angles[j]), float(v[6 + j]),
                               physicsClientId=self.client)
+        # contact points as of the new pose (normal forces stay 0 until the next step)
+        p.performCollisionDetection(physicsClientId=self.client)
 
     def _joint_angles(self, q: np.ndarray) -> np.ndarray:
         """(nj,) joint angles of ``q`` (continuous joints' (cos, sin) turned into angles)."""

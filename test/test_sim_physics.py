@@ -1,0 +1,272 @@
+"""The pybullet simulator library: model fidelity, conventions, control, pushes (no ROS)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pybullet as p
+import pytest
+
+from horizon_mpc.sim import JointTrajectoryCommand, Simulator, write_gif
+from horizon_mpc.sim.rotations import quat_from_yaw
+from horizon_mpc.sim.standing import standing_feedforward
+
+
+@pytest.fixture(scope="module")
+def go2():
+    sim = Simulator("go2")
+    yield sim
+    sim.close()
+
+
+@pytest.fixture(autouse=True)
+def _fresh(request):
+    """Tests using the shared go2 start from the standing start at t = 0."""
+    if "go2" in request.fixturenames:
+        request.getfixturevalue("go2").reset()
+
+
+def random_configuration(sim: Simulator, seed: int) -> np.ndarray:
+    """A configuration with a tilted, raised base and joints spread within their limits."""
+    rng = np.random.default_rng(seed)
+    q = sim.q_start.copy()
+    q[0:3] += rng.uniform(-0.3, 0.3, 3) + [0.0, 0.0, 0.5]
+    axis = rng.normal(size=3)
+    rot = pin.AngleAxis(0.6, axis / np.linalg.norm(axis)).matrix()
+    q[3:7] = pin.Quaternion(rot).coeffs()
+    q[7:] += rng.uniform(-0.3, 0.3, sim.n_joints)
+    return q
+
+
+# ---------------------------------------------------------------- model fidelity
+@pytest.mark.parametrize("robot", ["go2", "solo12", "anymal_c", "centauro"])
+def test_total_mass_matches_pinocchio(robot):
+    """Links without <inertial> (anymal's base, CENTAURO's contact frames) must not add 1 kg."""
+    with Simulator(robot) as sim:
+        expected = pin.computeTotalMass(sim.model)
+        assert sim.total_mass() == pytest.approx(expected, rel=0.01)
+
+
+@pytest.mark.parametrize("robot", ["go2", "anymal_c"])
+def test_state_round_trips_in_pinocchio_conventions(robot):
+    """set_state(q, v) then state() gives q, v back (base frame twist, joints by name)."""
+    with Simulator(robot) as sim:
+        q = random_configuration(sim, 1)
+        v = np.random.default_rng(2).uniform(-1.0, 1.0, sim.model.nv)
+        sim.set_state(q, v)
+        st = sim.state()
+        np.testing.assert_allclose(st.q[:3], q[:3], atol=1e-6)
+        assert abs(abs(st.q[3:7] @ q[3:7]) - 1.0) < 1e-6  # same rotation (q ~ -q)
+        np.testing.assert_allclose(st.q[7:], q[7:], atol=1e-6)
+        np.testing.assert_allclose(st.v, v, atol=1e-6)
+
+
+@pytest.mark.parametrize("robot", ["go2", "anymal_c", "solo12"])
+def test_link_positions_match_pinocchio_forward_kinematics(robot):
+    """pybullet's URDF link frames equal Pinocchio's FK at the simulator's q.
+
+    go2's root link has an offset, rotated inertial frame (pybullet's base pose is that
+    frame); anymal's pybullet joint order differs from Pinocchio's.
+    """
+    with Simulator(robot) as sim:
+        sim.set_state(random_configuration(sim, 3))
+        sim.step(5)  # let it fall a little: a state pybullet computed itself
+        q = sim.state().q
+        data = sim.model.createData()
+        pin.framesForwardKinematics(sim.model, data, q)
+        for foot in sim.feet:
+            pos, _ = sim.link_pose(foot)
+            expected = data.oMf[sim.model.getFrameId(foot)].translation
+            np.testing.assert_allclose(pos, expected, atol=1e-6, err_msg=foot)
+
+
+def test_twist_is_expressed_in_the_base_frame(go2):
+    """Yawed 90 deg and moving along world +y, the base moves along its own +x."""
+    q = go2.q_start.copy()
+    q[2] += 1.0
+    q[3:7] = quat_from_yaw(np.pi / 2)
+    go2.set_state(q)
+    p.resetBaseVelocity(go2.body, [0.0, 1.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=go2.client)
+    st = go2.state()
+    np.testing.assert_allclose(st.base_linear_velocity, [1.0, 0.0, 0.0], atol=1e-6)
+    p.resetBaseVelocity(go2.body, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], physicsClientId=go2.client)
+    st = go2.state()
+    np.testing.assert_allclose(st.base_angular_velocity, [0.0, -1.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(st.v[3:6], st.base_angular_velocity)
+
+
+def test_joint_velocity_motors_are_disabled(go2):
+    """With zero gains the legs fold under gravity: nothing else holds the joints."""
+    go2.kp[:] = 0.0
+    go2.kd[:] = 0.0
+    go2.reference.hold(np.zeros(go2.n_joints), np.zeros(go2.n_joints))
+    try:
+        go2.step(300)
+        assert go2.state().q[2] < go2.q_start[2] - 0.1
+    finally:
+        go2.kp[:] = go2.cfg.sim.kp
+        go2.kd[:] = go2.cfg.sim.kd
+
+
+def test_applied_torques_respect_the_effort_limits(go2):
+    target = go2.state().joint_positions + 3.0  # far away: the PD term saturates
+    go2.set_trajectory(JointTrajectoryCommand(go2.joint_names, 0.0, np.array([0.0]),
+                                              target[None, :]))
+    go2.step(2)
+    tau = go2.state().tau
+    assert np.all(np.abs(tau) <= go2.effort_limit + 1e-9)
+    np.testing.assert_allclose(np.abs(tau), go2.effort_limit)
+
+
+def test_standing_feedforward_balances_gravity(go2):
+    """g(q) = S^T tau + J_c^T f holds exactly, and the weight is shared by the feet."""
+    tau, f = go2.tau_standing, go2.standing_forces
+    model, q = go2.model, go2.q_start
+    data = model.createData()
+    g = pin.computeGeneralizedGravity(model, data, q)
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    jt_f = sum(
+        pin.getFrameJacobian(model, data, model.getFrameId(foot),
+                             pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3].T @ f[i]
+        for i, foot in enumerate(go2.feet)
+    )
+    np.testing.assert_allclose(g, np.concatenate((np.zeros(6), tau)) + jt_f, atol=1e-6)
+    assert f[:, 2].sum() == pytest.approx(pin.computeTotalMass(model) * 9.81, rel=1e-3)
+
+
+# ---------------------------------------------------------------- behaviour
+@pytest.mark.parametrize("robot", ["go2", "solo12", "anymal_c"])
+def test_standing_hold_keeps_height_for_10s(robot):
+    """PD hold + gravity-compensating feed-forward: base height within 2 cm for 10 s."""
+    with Simulator(robot) as sim:
+        start = sim.state()
+        assert start.foot_contact.all()
+        heights = []
+        for _ in range(100):
+            sim.step(round(0.1 / sim.dt))
+            heights.append(sim.state().q[2])
+        assert sim.time == pytest.approx(10.0)
+        assert np.max(np.abs(np.array(heights) - sim.q_start[2])) < 0.02
+        end = sim.state()
+        assert end.foot_contact.all()
+        # standing still: the weight is on the feet and nothing moves
+        assert end.foot_force.sum() == pytest.approx(sim.total_mass() * 9.81, rel=0.05)
+        assert np.abs(end.v).max() < 0.05
+
+
+def test_simulators_in_one_process_are_independent():
+    with Simulator("go2") as a, Simulator("go2") as b:
+        a.push(a.robot.root_link, [0.0, 60.0, 0.0], duration=0.1)
+        a.step(100)
+        b.step(100)
+        assert a.client != b.client
+        assert a.state().q[1] > 0.005
+        assert abs(b.state().q[1]) < 1e-3
+
+
+def test_push_moves_the_base_in_the_push_direction(go2):
+    go2.push(go2.robot.root_link, [0.0, 40.0, 0.0], duration=0.1)
+    go2.step(100)
+    st = go2.state()
+    assert st.q[1] > 0.005  # m, moved along +y ...
+    assert abs(st.q[0]) < st.q[1] / 2  # ... and mainly along y
+    assert st.base_linear_velocity[1] > 0.1
+
+
+def test_push_on_a_foot_link_and_bad_pushes(go2):
+    go2.push(go2.feet[0], [0.0, 0.0, 30.0], duration=0.05)
+    go2.step(50)
+    with pytest.raises(ValueError, match="unknown link 'nope'"):
+        go2.push("nope", [1.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="NaN"):
+        go2.push(go2.robot.root_link, [np.nan, 0.0, 0.0])
+    with pytest.raises(ValueError, match="duration"):
+        go2.push(go2.robot.root_link, [1.0, 0.0, 0.0], duration=0.0)
+
+
+def test_reset_restores_the_start_state(go2):
+    go2.push(go2.robot.root_link, [50.0, 0.0, 0.0], duration=0.2)
+    go2.step(300)
+    go2.reset()
+    st = go2.state()
+    assert go2.time == 0.0
+    np.testing.assert_allclose(st.q, go2.q_start, atol=1e-9)
+    np.testing.assert_allclose(st.v, 0.0, atol=1e-9)
+    assert go2.reference.holding
+    go2.step(200)  # and the pushes are gone
+    assert np.abs(go2.state().q[:2]).max() < 0.01
+
+
+def crouch(sim: Simulator, depth: float = 0.25, duration: float = 1.0, points: int = 21):
+    """A smooth go2 crouch from the standing posture: thighs +depth, calves -2 depth (rad)."""
+    start = sim.state().joint_positions
+    delta = np.array([depth if n.endswith("thigh_joint") else -2 * depth
+                      if n.endswith("calf_joint") else 0.0 for n in sim.joint_names])
+    times = np.linspace(0.0, duration, points)
+    s = 0.5 - 0.5 * np.cos(np.pi * times / duration)
+    ds = 0.5 * np.pi / duration * np.sin(np.pi * times / duration)
+    q_end = sim.q_start.copy()
+    q_end[7:] = start + delta
+    tau_end, _ = standing_feedforward(sim.model, q_end, sim.feet)
+    efforts = sim.tau_standing + s[:, None] * (tau_end - sim.tau_standing)
+    cmd = JointTrajectoryCommand(sim.joint_names, sim.time, times,
+                                 start + s[:, None] * delta, ds[:, None] * delta, efforts)
+    return cmd, lambda t: start + (0.5 - 0.5 * np.cos(np.pi * min(t, duration) / duration)) * delta
+
+
+def test_trajectory_is_tracked_then_held():
+    with Simulator("go2", trajectory_timeout=5.0) as sim:
+        cmd, ref = crouch(sim)
+        sim.set_trajectory(cmd)
+        errors = []
+        for _ in range(100):
+            sim.step(10)
+            st = sim.state()
+            errors.append(np.abs(st.joint_positions - ref(st.time)).max())
+        # 0.1 rad: PD (kp 30) with static feed-forward only, during a 1 s crouch of 0.5 rad
+        assert max(errors) < 0.1
+        heights = []
+        for _ in range(20):
+            sim.step(100)
+            heights.append(sim.state().q[2])
+        st = sim.state()
+        assert sim.reference.holding
+        # 0.05 rad = 1.5 N m at kp 30: the real load sharing differs from the feed-forward's
+        assert np.abs(st.joint_positions - cmd.positions[-1]).max() < 0.05
+        assert np.ptp(heights) < 0.005  # m: holding still, not sagging
+        assert heights[-1] < sim.q_start[2] - 0.05  # and crouched
+
+
+def test_invalid_command_is_rejected_and_the_last_good_one_kept(go2):
+    cmd, _ = crouch(go2)
+    go2.set_trajectory(cmd)
+    go2.step(100)
+    before = go2.reference.reference(go2.time)
+    bad = JointTrajectoryCommand(go2.joint_names[:-1], go2.time, np.array([0.0]),
+                                 np.zeros((1, go2.n_joints - 1)))
+    with pytest.raises(ValueError, match="missing joint names"):
+        go2.set_trajectory(bad)
+    after = go2.reference.reference(go2.time)
+    for x, y in zip(before, after, strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_commands_are_matched_by_joint_name(go2):
+    cmd, _ = crouch(go2)
+    order = list(reversed(go2.joint_names))
+    go2.set_trajectory(cmd.reordered(order))
+    q_reversed = go2.reference.reference(0.5)[0].copy()
+    go2.set_trajectory(cmd)
+    np.testing.assert_array_equal(q_reversed, go2.reference.reference(0.5)[0])
+
+
+def test_render_and_gif(go2, tmp_path):
+    frames = []
+    for _ in range(3):
+        go2.step(20)
+        frames.append(go2.render(64, 48))
+    assert frames[0].shape == (48, 64, 3) and frames[0].dtype == np.uint8
+    assert frames[0].std() > 5  # not a blank image
+    path = write_gif(tmp_path / "go2.gif", frames, fps=10)
+    assert path.stat().st_size > 0
