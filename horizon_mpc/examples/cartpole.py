@@ -25,7 +25,7 @@ def cartpole_dynamics(q: cs.SX, v: cs.SX, u: cs.SX, m_cart: float = 1.0, m_pole:
     return cs.vertcat(pdd, thdd)
 
 
-def build_cartpole(n_nodes: int = 100, duration: float = 4.0,
+def build_cartpole(n_nodes: int = 100, duration: float = 2.0,
                    transcription: str = "multiple_shooting", integrator: str = "rk4",
                    degree: int = 3, u_max: float | None = None, cart_limit: float | None = None,
                    w_effort: float = 1.0, w_velocity: float = 1e-2,

@@ -1,0 +1,239 @@
+"""A sparse Gauss-Newton SQP for problems whose cost is a sum of squared residuals.
+
+With ``f(w) = ||R(w)||^2`` (see :mod:`horizon_mpc.problem.transcription`), every iteration
+solves the QP
+
+    min_d  1/2 d' (2 J_R' J_R + reg I) d + (2 J_R' R)' d
+    s.t.   lbg - g(w) <= J_g(w) d <= ubg - g(w),     lbx - w <= d <= ubx - w
+
+through CasADi's ``conic`` interface (sparsity fixed, QP solver built once), then takes a
+step ``w += alpha d`` chosen by backtracking (Armijo) on the l1 merit function
+``phi(w) = f(w) + mu ||viol(g(w))||_1``, whose penalty ``mu`` never decreases and stays above
+the largest QP multiplier. Multipliers follow ``lam += alpha (lam_QP - lam)``.
+
+Convergence: the constraint violation (dynamics, constraints, bounds; inf-norm) is below
+``tol_constr`` and either the KKT stationarity ``||grad f + J_g' lam_g + lam_x||_inf`` is
+below ``tol`` or the last step ``||alpha d||_inf`` is below ``tol_step``.
+
+Options (``make_solver('gnsqp', prb, opts)``):
+
+================== ========== =========================================================
+``max_iter``       100        SQP iteration limit
+``tol``            1e-6       stationarity tolerance (inf-norm of the Lagrangian gradient)
+``tol_constr``     1e-8       constraint-violation tolerance
+``tol_step``       1e-10      step tolerance (inf-norm)
+``qp_solver``      'qrqp'     'qrqp', 'osqp', 'qpoases' or 'proxqp' (any CasADi conic)
+``qp_options``     {}         options handed to the QP solver plugin (merged over ours)
+``regularization`` 1e-8       ``reg`` added to the Gauss-Newton Hessian's diagonal
+``armijo``         1e-4       sufficient-decrease constant of the line search
+``min_step``       1e-8       smallest step length tried before giving up
+``sym``            'SX'       graph type of the transcription ('SX' or 'MX')
+================== ========== =========================================================
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import casadi as cs
+import numpy as np
+
+from horizon_mpc.problem import Problem
+from horizon_mpc.problem.transcription import Transcription
+from horizon_mpc.solvers.base import Solver
+
+__all__ = ["GnSqpSolver"]
+
+log = logging.getLogger(__name__)
+
+# Accurate, quiet settings per QP plugin (the SQP needs precise multipliers).
+QP_DEFAULTS: dict[str, dict[str, Any]] = {
+    "qrqp": {"print_iter": False, "print_header": False, "print_info": False,
+             "max_iter": 10000, "error_on_fail": False},
+    "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-10, "eps_rel": 1e-10, "polish": True,
+                      "max_iter": 100000}, "warm_start_primal": True, "warm_start_dual": True,
+             "error_on_fail": False},
+    "qpoases": {"printLevel": "none", "sparse": True, "error_on_fail": False},
+    "proxqp": {"proxqp": {"eps_abs": 1e-10, "max_iter": 10000}, "error_on_fail": False},
+}
+
+
+class GnSqpSolver(Solver):
+    """Gauss-Newton SQP with an l1-merit line search (see the module docstring).
+
+    Attributes:
+        transcription: the :class:`Transcription`.
+        lam_x, lam_g: multipliers of the last solve (None before), kept for warm starts.
+    """
+
+    name = "gnsqp"
+    DEFAULTS: dict[str, Any] = {
+        "max_iter": 100, "tol": 1e-6, "tol_constr": 1e-8, "tol_step": 1e-10,
+        "qp_solver": "qrqp", "qp_options": {}, "regularization": 1e-8, "armijo": 1e-4,
+        "min_step": 1e-8, "sym": "SX", "nonmonotone": 3,
+        "elastic_penalty": 1e4,
+    }
+
+    def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
+        general = [n for n, c in prb.costs.items() if c.kind == "general cost"]
+        if general:
+            raise ValueError(f"gnsqp minimises sums of squared residuals; the general cost(s) "
+                             f"{general} need a full Hessian: use the 'ipopt' solver, or write "
+                             "them as residuals with create_cost()")
+        super().__init__(prb, opts)
+        tr = self.transcription = Transcription(prb, sym=self.opts["sym"])
+        w, P, R, g = tr.nlp["x"], tr.nlp["p"], tr.residual, tr.nlp["g"]
+        T = type(w)
+        reg, lam_g, lam_x = T.sym("reg"), T.sym("lam_g", tr.ng), T.sym("lam_x", tr.nw)
+        J_R, J_g = cs.jacobian(R, w), cs.jacobian(g, w)
+        H = 2 * cs.mtimes(J_R.T, J_R) + reg * T.eye(tr.nw)
+        grad = 2 * cs.mtimes(J_R.T, R)
+        f = cs.sumsqr(R)
+        stationarity = cs.norm_inf(grad + cs.mtimes(J_g.T, lam_g) + lam_x)
+        # one call per iteration (each Python -> CasADi call costs tens of microseconds)
+        self._linearize = cs.Function(
+            "gn_linearize", [w, P, reg, lam_g, lam_x], [H, grad, f, g, J_g, stationarity],
+            ["w", "p", "reg", "lam_g", "lam_x"], ["H", "grad", "f", "g", "J_g", "stat"])
+        self._evaluate = cs.Function("gn_evaluate", [w, P], [f, g], ["w", "p"], ["f", "g"])
+        self._H_sp, self._A_sp = H.sparsity(), J_g.sparsity()
+        self._qp: dict[bool, cs.Function] = {}
+        self.lam_x: np.ndarray | None = None
+        self.lam_g: np.ndarray | None = None
+        self.w: np.ndarray | None = None
+
+    def set_option(self, key: str, value: Any) -> None:
+        """Change one option; a new QP solver is built on the next solve if needed."""
+        if key == "sym" and value != self.opts["sym"]:
+            raise ValueError("option 'sym' fixes the NLP graph; set it when building the solver")
+        super().set_option(key, value)
+        if key in ("qp_solver", "qp_options", "regularization"):
+            self._qp.clear()
+
+    def _qp_solver(self, elastic: bool = False) -> cs.Function:
+        if elastic not in self._qp:
+            name = self.opts["qp_solver"]
+            qp_opts = {**QP_DEFAULTS.get(name, {}), **self.opts["qp_options"]}
+            H_sp, A_sp = self._H_sp, self._A_sp
+            if elastic:  # slacks s+ and s- on every constraint row
+                ng = A_sp.size1()
+                H_sp = cs.diagcat(H_sp, cs.Sparsity.diag(2 * ng))
+                A_sp = cs.horzcat(A_sp, cs.Sparsity.diag(ng), cs.Sparsity.diag(ng))
+            self._qp[elastic] = cs.conic(f"gn_qp{'_elastic' if elastic else ''}", name,
+                                         {"h": H_sp, "a": A_sp}, qp_opts)
+        return self._qp[elastic]
+
+    def _step(self, H, grad, J, g, w, lbx, ubx, lbg, ubg, lam_g, lam_x, mu):
+        """Solve the QP for a step; fall back to the elastic (l1-relaxed) QP when the
+        linearised constraints are infeasible. Returns (d, lam_g, lam_x, slack_sum, mu) or
+        None when both fail."""
+        nw, ng = w.size, g.size
+        qp = self._qp_solver()
+        sol = qp(h=H, g=grad, a=J, lba=lbg - g, uba=ubg - g, lbx=lbx - w, ubx=ubx - w,
+                 x0=np.zeros(nw), lam_a0=lam_g, lam_x0=lam_x)
+        if qp.stats().get("success", True):
+            d, lg, lx = (sol[k].full().ravel() for k in ("x", "lam_a", "lam_x"))
+            return d, lg, lx, 0.0, max(mu, 1.1 * float(np.max(np.abs(lg), initial=0.0)))
+        self._elastic_steps += 1
+        rho = max(self.opts["elastic_penalty"], mu)
+        qp = self._qp_solver(elastic=True)
+        eye = cs.DM.eye(ng)
+        zeros, infs = np.zeros(2 * ng), np.full(2 * ng, np.inf)
+        sol = qp(h=cs.diagcat(H, self.opts["regularization"] * cs.DM.eye(2 * ng)),
+                 g=np.concatenate([grad, np.full(2 * ng, rho)]), a=cs.horzcat(J, eye, -eye),
+                 lba=lbg - g, uba=ubg - g, lbx=np.concatenate([lbx - w, zeros]),
+                 ubx=np.concatenate([ubx - w, infs]), lam_a0=lam_g)
+        if not qp.stats().get("success", True):
+            return None
+        z, lg, lx = (sol[k].full().ravel() for k in ("x", "lam_a", "lam_x"))
+        return z[:nw], lg, lx[:nw], float(np.sum(z[nw:])), max(mu, rho)
+
+    # ------------------------------------------------------------------ solve
+    def _solve(self) -> bool:
+        o, tr = self.opts, self.transcription
+        lbx, ubx = tr.bounds_w()
+        lbg, ubg = tr.bounds_g()
+        p = tr.parameters()
+        w = np.clip(tr.initial_w(), lbx, ubx)
+        lam_g = self.lam_g if self.lam_g is not None else np.zeros(tr.ng)
+        lam_x = self.lam_x if self.lam_x is not None else np.zeros(tr.nw)
+        history: list[dict[str, float]] = []
+        self._merit_history: list[float] = []
+        self._elastic_steps = 0
+        mu, status, alpha, step, success = 0.0, "max_iter reached", 1.0, np.inf, False
+        t0 = time.perf_counter()
+        it = 0
+        for it in range(o["max_iter"] + 1):
+            H, grad, f, g, J, stat = self._linearize(w, p, o["regularization"], lam_g, lam_x)
+            grad, g, f = grad.full().ravel(), g.full().ravel(), float(f)
+            # dual scaling as IPOPT's: large multipliers relax the stationarity test
+            scale = max(100.0, (np.abs(lam_g).sum() + np.abs(lam_x).sum())
+                        / max(1, tr.ng + tr.nw)) / 100.0
+            stat = float(stat) / scale
+            viol = tr.violation(w, g, lbx, ubx, lbg, ubg)
+            history.append({"iteration": it, "cost": f, "violation": viol,
+                            "stationarity": stat, "step": step, "alpha": alpha, "mu": mu})
+            if viol <= o["tol_constr"] and (stat <= o["tol"] or step <= o["tol_step"]):
+                status, success = "converged", True
+                break
+            if it == o["max_iter"]:
+                break
+            res = self._step(H, grad, J, g, w, lbx, ubx, lbg, ubg, lam_g, lam_x, mu)
+            if res is None:
+                status = (f"QP failed ({self._qp_solver(True).stats().get('return_status')})")
+                break
+            d, lg_qp, lx_qp, slack, mu = res
+            alpha = self._line_search(w, d, p, f, g, grad, mu, slack, lbg, ubg)
+            if alpha is None:
+                status, alpha = "line search failed", 0.0
+                break
+            w = np.clip(w + alpha * d, lbx, ubx)
+            lam_g = lam_g + alpha * (lg_qp - lam_g)
+            lam_x = lam_x + alpha * (lx_qp - lam_x)
+            step = alpha * float(np.max(np.abs(d), initial=0.0))
+        elapsed = time.perf_counter() - t0
+        self.w, self.lam_g, self.lam_x = w, lam_g, lam_x
+        self._split_solution(*tr.unpack(w))
+        s = self.stats
+        last = history[-1]
+        s.success, s.status, s.iterations, s.time = success, status, it, elapsed
+        s.cost, s.constraint_violation = last["cost"], last["violation"]
+        s.history = history
+        s.extra = {"stationarity": last["stationarity"], "qp_solver": o["qp_solver"],
+                   "elastic_steps": self._elastic_steps}
+        log.debug("gnsqp: %s in %d iterations, %.4f s, cost %.6g, violation %.2e", status, it,
+                  elapsed, s.cost, s.constraint_violation)
+        return success
+
+    def _line_search(self, w, d, p, f, g, grad, mu, slack, lbg, ubg) -> float | None:
+        """Backtracking (non-monotone Armijo) on the l1 merit; the step length or None."""
+        def infeasibility(gv: np.ndarray) -> float:
+            return float(np.sum(np.maximum(0.0, np.maximum(lbg - gv, gv - ubg))))
+
+        phi0 = f + mu * infeasibility(g)
+        self._merit_history.append(phi0)
+        ref = max(self._merit_history[-self.opts["nonmonotone"]:])
+        slack_tol = 1e-12 * max(1.0, abs(ref))  # rounding of the merit near convergence
+        # directional derivative of the merit along d (the linearisation leaves `slack`)
+        slope = min(0.0, float(grad @ d) + mu * (slack - infeasibility(g)))
+        alpha = 1.0
+        while alpha >= self.opts["min_step"]:
+            f1, g1 = self._evaluate(w + alpha * d, p)
+            phi1 = float(f1) + mu * infeasibility(g1.full().ravel())
+            if phi1 <= ref + self.opts["armijo"] * alpha * slope + slack_tol:
+                return alpha
+            alpha *= 0.5
+        return None
+
+    def shift(self) -> None:
+        """Shift the guesses and parameters (``Problem.shift``) and the multipliers."""
+        super().shift()
+        tr = self.transcription
+        if self.lam_x is not None:
+            self.lam_x = tr.shift_vector(self.lam_x, tr.w_blocks)
+            self.lam_g = tr.shift_vector(self.lam_g, tr.g_blocks)
+
+    def reset(self) -> None:
+        """Forget the multipliers: the next solve starts from zero multipliers."""
+        self.lam_x = self.lam_g = None
