@@ -47,7 +47,7 @@ export MPLBACKEND ?= Agg
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export HORIZON_MPC_PEER_PYTHON := $(abspath $(PEER_VENV))/bin/python
 
-.PHONY: help setup demo test lint bench peer-venv clean
+.PHONY: help setup demo test lint bench peer-venv clean FORCE
 
 help:
 	@echo "horizon_mpc make targets:"
@@ -66,6 +66,12 @@ $(VPY):
 		"horizon_mpc needs Python >= 3.11; $(PYTHON) is " + sys.version.split()[0])'
 	@echo "==> Creating the virtual environment $(VENV) with $$($(PYTHON) --version)"
 	$(PYTHON) -m venv $(VENV)
+
+# The stamp cannot see an out-of-band `pip uninstall`: reinstall when the venv has no
+# horizon_mpc distribution at all.
+ifeq ($(wildcard $(VENV)/lib/python3*/site-packages/horizon_mpc-*.dist-info),)
+$(DEPS_STAMP): FORCE
+endif
 
 $(DEPS_STAMP): | $(VPY)
 	@echo "==> Installing horizon_mpc (editable) and its dependencies from PyPI into $(VENV):"
@@ -120,6 +126,8 @@ bench: setup peer-venv
 
 clean:
 	rm -rf build horizon_mpc.egg-info
+
+FORCE:
 
 # `make print-DEPS_STAMP` shows a variable (used by test/test_package.py).
 print-%:

@@ -9,7 +9,6 @@ tree into temporary prefixes, offline.
 from __future__ import annotations
 
 import ast
-import importlib.metadata
 import json
 import os
 import re
@@ -156,10 +155,20 @@ def test_launcher_is_executable_in_the_tree_and_in_git(exe):
             assert staged.startswith("100755"), staged
 
 
-def test_installed_distribution_declares_the_console_scripts():
-    dist = importlib.metadata.distribution(PACKAGE)
-    scripts = {ep.name: ep.value for ep in dist.entry_points if ep.group == "console_scripts"}
-    assert scripts == EXECUTABLES
+_CONSOLE_SCRIPTS_PROBE = """
+import importlib.metadata, json
+dist = importlib.metadata.distribution("horizon_mpc")
+print(json.dumps({ep.name: ep.value for ep in dist.entry_points
+                  if ep.group == "console_scripts"}))
+"""
+
+
+def test_installed_distribution_declares_the_console_scripts(tmp_path):
+    # run outside the source tree: there, its horizon_mpc.egg-info would stand in for an install
+    proc = subprocess.run([sys.executable, "-c", _CONSOLE_SCRIPTS_PROBE], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, f"horizon_mpc is not installed (`make setup`): {proc.stderr}"
+    assert json.loads(proc.stdout.splitlines()[-1]) == EXECUTABLES
 
 
 # --------------------------------------------------------------------------------------------
@@ -212,14 +221,16 @@ def test_ament_index_finds_the_package_in_the_venv_prefix(venv_package_prefix):
 
 
 @pytest.mark.parametrize("exe", sorted(EXECUTABLES))
-def test_ros2_run_finds_an_executable_whose_target_exists(exe, venv_package_prefix):
+def test_ros2_run_finds_an_executable_whose_target_exists(exe, venv_package_prefix, tmp_path):
     path = venv_package_prefix / "lib" / PACKAGE / exe
     assert path.is_file(), f"{path} missing: run `make setup`"
     assert os.access(path, os.X_OK)
     interpreter = _shebang_interpreter(path)
     module, func = EXECUTABLES[exe].split(":")
-    proc = subprocess.run([interpreter, "-c", _TARGET_PROBE, module, func],
-                          capture_output=True, text=True, timeout=300)
+    # from a neutral cwd, as `ros2 run` would be: only the installed package is importable
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    proc = subprocess.run([interpreter, "-c", _TARGET_PROBE, module, func], cwd=tmp_path,
+                          env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, f"{exe} -> {EXECUTABLES[exe]}: {proc.stderr.strip()[-2000:]}"
 
 
@@ -246,13 +257,21 @@ def test_colcon_style_install_puts_executables_in_lib_and_registers_the_package(
     assert _get_package_prefix([str(prefix)]) == prefix
 
 
+def _venv_distributions() -> list[str]:
+    """horizon_mpc's metadata folders in the running interpreter's site-packages."""
+    return sorted(p.name for p in Path(sys.prefix).glob("lib/python3*/site-packages/horizon_mpc*"))
+
+
 def test_pip_install_puts_launchers_in_lib_and_console_scripts_in_bin(tmp_path):
     src = _copy_source(tmp_path / "src")
     prefix = tmp_path / "prefix"
+    # --ignore-installed: without it, pip uninstalls the venv's own horizon_mpc first
     cmd = [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-index",
-           "--no-build-isolation", "--prefix", str(prefix), str(src)]
+           "--no-build-isolation", "--ignore-installed", "--prefix", str(prefix), str(src)]
+    installed_before = _venv_distributions()
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
+    assert _venv_distributions() == installed_before
     for exe in EXECUTABLES:
         launcher = prefix / "lib" / PACKAGE / exe
         assert os.access(launcher, os.X_OK), exe  # pip keeps the data file's exec bit
@@ -341,6 +360,8 @@ def _stamped_venv(tree: Path) -> Path:
     venv = tree / "venv"
     (venv / "bin").mkdir(parents=True)
     (venv / "bin" / "python").touch()
+    (venv / "lib" / "python3.11" / "site-packages" / "horizon_mpc-0.1.0.dist-info").mkdir(
+        parents=True)
     now = time.time()
     for offset, var in ((-500, "DEPS_STAMP"), (-400, "DATA_STAMP")):
         stamp = tree / _make(tree, "-s", f"print-{var}", f"VENV={venv}").strip()
@@ -360,6 +381,12 @@ def test_make_setup_does_nothing_once_set_up(make_tree):
     venv = _stamped_venv(make_tree)
     dry_run = _make(make_tree, "-n", "setup", f"VENV={venv}")
     assert "pip" not in dry_run and "install_data" not in dry_run, dry_run
+
+
+def test_make_setup_reinstalls_when_the_package_was_uninstalled(make_tree):
+    venv = _stamped_venv(make_tree)
+    shutil.rmtree(venv / "lib")
+    assert "-m pip install" in _make(make_tree, "-n", "setup", f"VENV={venv}")
 
 
 def test_make_setup_reruns_pip_when_setup_py_changes(make_tree):
