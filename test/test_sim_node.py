@@ -1,0 +1,281 @@
+"""The sim_node through rclpy, in-process (DDS on localhost, see conftest.py).
+
+Each test gets its own rclpy Context, so these tests do not depend on (or disturb) the
+default context other test modules may use.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from horizon_mpc.nodes.conversions import (
+    duration_from_seconds,
+    odometry_from_msg,
+    time_from_ns,
+    time_to_ns,
+)
+from horizon_mpc.nodes.sim_node import SimNode
+from horizon_mpc.sim.rotations import quat_from_yaw
+
+assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"  # set by conftest.py
+
+
+class Harness:
+    """A SimNode plus a probe node (subscribers, publishers) on one executor."""
+
+    def __init__(self, context: rclpy.Context, **params: object) -> None:
+        self.context = context
+        overrides = [Parameter(k, value=v) for k, v in params.items()]
+        self.sim = SimNode(parameter_overrides=overrides, context=context)
+        self.probe = Node("probe", context=context)
+        self.joint_states: list[JointState] = []
+        self.odoms: list[Odometry] = []
+        self.clocks: list[Clock] = []
+        self.probe.create_subscription(JointState, "joint_states", self.joint_states.append, 100)
+        self.probe.create_subscription(Odometry, "odom", self.odoms.append, 100)
+        self.probe.create_subscription(Clock, "/clock", self.clocks.append, 100)
+        self.trajectory_pub = self.probe.create_publisher(JointTrajectory, "joint_trajectory", 10)
+        self.wrench_pub = self.probe.create_publisher(WrenchStamped, "external_wrench", 10)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.sim)
+        self.executor.add_node(self.probe)
+
+    def spin_until(self, done: Callable[[], bool], timeout: float = 10.0) -> None:
+        end = time.monotonic() + timeout
+        while not done():
+            assert time.monotonic() < end, "timed out waiting in the executor"
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def wait_until_connected(self) -> None:
+        """Until our publishers are matched with the simulator's subscriptions."""
+        self.spin_until(lambda: self.trajectory_pub.get_subscription_count() > 0
+                        and self.wrench_pub.get_subscription_count() > 0)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.sim.destroy_node()
+        self.probe.destroy_node()
+
+
+@pytest.fixture
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def harness_factory(context):
+    made: list[Harness] = []
+
+    def make(**params: object) -> Harness:
+        made.append(Harness(context, **params))
+        return made[-1]
+
+    yield make
+    for h in made:
+        h.close()
+
+
+def trajectory(sim: SimNode, stamp_ns: int, offset: float = 0.0) -> JointTrajectory:
+    """Hold the nominal posture shifted by ``offset`` rad, with standing feed-forward."""
+    msg = JointTrajectory(joint_names=list(sim.sim.joint_names))
+    msg.header.stamp = time_from_ns(stamp_ns)
+    q = sim.sim.q_start[7:] + offset
+    for t in (0.0, 0.05):
+        msg.points.append(JointTrajectoryPoint(
+            positions=q.tolist(), velocities=[0.0] * len(q),
+            effort=sim.sim.tau_standing.tolist(), time_from_start=duration_from_seconds(t)))
+    return msg
+
+
+def assert_matches_ground_truth(h: Harness) -> None:
+    js, odom = h.joint_states[-1], h.odoms[-1]
+    truth = h.sim.sim.state()
+    assert time_to_ns(js.header.stamp) == time_to_ns(odom.header.stamp) == h.sim.now_ns
+    assert list(js.name) == h.sim.sim.joint_names  # Pinocchio model order
+    np.testing.assert_array_equal(js.position, truth.joint_positions)
+    np.testing.assert_array_equal(js.velocity, truth.joint_velocities)
+    np.testing.assert_array_equal(js.effort, truth.tau)
+    pos, quat, lin, ang = odometry_from_msg(odom)
+    assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base")
+    np.testing.assert_allclose(pos, truth.base_position, atol=1e-12)
+    np.testing.assert_allclose(quat, truth.base_quaternion, atol=1e-12)
+    np.testing.assert_allclose(lin, truth.base_linear_velocity, atol=1e-12)
+    np.testing.assert_allclose(ang, truth.base_angular_velocity, atol=1e-12)
+
+
+def test_published_state_equals_ground_truth(harness_factory):
+    """Lockstep freezes the simulation between states, so the truth can be read afterwards."""
+    h = harness_factory(lockstep=True, lockstep_timeout=0.0, control_period=0.01)
+    h.spin_until(lambda: h.joint_states and h.odoms and h.clocks)
+    assert h.sim.now_ns == 0
+    assert_matches_ground_truth(h)
+    h.sim.sim.push("base", [0.0, 40.0, 0.0], duration=0.05)  # some motion
+    h.sim.step_once()
+    h.spin_until(lambda: min(len(h.odoms), len(h.joint_states), len(h.clocks)) >= 2)
+    assert h.sim.now_ns == 10_000_000
+    assert_matches_ground_truth(h)
+    assert time_to_ns(h.clocks[-1].clock) == h.sim.now_ns
+
+
+def test_odometry_twist_is_in_the_base_frame(harness_factory):
+    """Yawed 90 deg, moving along its own x: world velocity +y, published twist +x."""
+    h = harness_factory(lockstep=True, lockstep_timeout=0.0, control_period=0.001)
+    h.spin_until(lambda: h.odoms)
+    q = h.sim.sim.q_start.copy()
+    q[2] += 0.5
+    q[3:7] = quat_from_yaw(np.pi / 2)
+    v = np.zeros(h.sim.sim.model.nv)
+    v[0] = 1.0
+    h.sim.sim.set_state(q, v)
+    h.sim.step_once()
+    h.spin_until(lambda: len(h.odoms) >= 2)
+    lin = odometry_from_msg(h.odoms[-1])[2]
+    np.testing.assert_allclose(lin, [1.0, 0.0, 0.0], atol=0.02)  # 1 ms of free fall
+    assert_matches_ground_truth(h)
+
+
+def test_free_running_publishes_at_the_state_rate(harness_factory):
+    h = harness_factory(realtime_factor=0.0, state_rate=500.0)
+    h.spin_until(lambda: len(h.joint_states) >= 20 and len(h.clocks) >= 20)
+    stamps = [time_to_ns(m.header.stamp) for m in h.joint_states]
+    assert np.all(np.diff(stamps) == 2_000_000)  # ns: 500 Hz of sim time, none lost
+    assert h.sim.now_ns >= stamps[-1]
+
+
+def controller(h: Harness) -> Callable[[JointState], None]:
+    """Answers every state with a trajectory stamped with the state's stamp (lockstep)."""
+
+    def answer(msg: JointState) -> None:
+        t = time_to_ns(msg.header.stamp) * 1e-9
+        offset = 0.1 * np.sin(2 * np.pi * t) + 0.01 * np.tanh(np.sum(msg.position))
+        h.trajectory_pub.publish(trajectory(h.sim, time_to_ns(msg.header.stamp), offset))
+
+    return answer
+
+
+def run_lockstep(context: rclpy.Context, steps: int) -> np.ndarray:
+    h = Harness(context, lockstep=True, lockstep_timeout=0.0, control_period=0.01)
+    try:
+        h.probe.create_subscription(JointState, "joint_states", controller(h), 100)
+        h.spin_until(lambda: len(h.odoms) > steps, timeout=60.0)
+        return np.array([[time_to_ns(js.header.stamp), *js.position, *js.velocity, *js.effort,
+                          *odometry_from_msg(od)[0]]
+                         for js, od in zip(h.joint_states, h.odoms, strict=False)])
+    finally:
+        h.close()
+
+
+def test_lockstep_runs_are_identical(context):
+    a = run_lockstep(context, 60)
+    b = run_lockstep(context, 60)
+    n = min(len(a), len(b))
+    assert n > 60
+    np.testing.assert_array_equal(np.diff(a[:n, 0]), 10_000_000)  # one control period each
+    np.testing.assert_array_equal(a[:n], b[:n])  # bit for bit
+    assert np.ptp(a[:n, 2]) > 0.05  # and the commands really moved the joints
+
+
+def test_lockstep_waits_for_the_answer_then_times_out(harness_factory):
+    h = harness_factory(lockstep=True, lockstep_timeout=0.2, control_period=0.01)
+    h.spin_until(lambda: h.joint_states)
+    first = time.monotonic()
+    h.spin_until(lambda: len(h.joint_states) >= 2)
+    assert time.monotonic() - first > 0.15  # waited for the (absent) answer
+    h.wait_until_connected()
+    h.trajectory_pub.publish(trajectory(h.sim, h.sim.now_ns))  # answer: next state at once
+    n = len(h.joint_states)
+    h.spin_until(lambda: len(h.joint_states) > n, timeout=0.15)
+
+
+def test_bad_inputs_are_rejected_and_the_sim_keeps_running(harness_factory):
+    h = harness_factory(realtime_factor=0.0)
+    h.wait_until_connected()
+    good = trajectory(h.sim, 0, offset=0.05)
+    bad_names = trajectory(h.sim, 0)
+    bad_names.joint_names[0] = "no_such_joint"
+    bad_nan = trajectory(h.sim, 0)
+    bad_nan.points[1].positions[3] = float("nan")
+    bad_time = trajectory(h.sim, 0)
+    bad_time.points[1].time_from_start = duration_from_seconds(0.0)
+    for msg in (good, bad_names, bad_nan, bad_time):
+        h.trajectory_pub.publish(msg)
+    h.spin_until(lambda: h.sim.rejected_trajectories >= 3)
+    # the good command is still the one in force
+    q_ref = h.sim.sim.reference.reference(h.sim.sim.time)[0]
+    np.testing.assert_allclose(q_ref, h.sim.sim.q_start[7:] + 0.05)
+    for frame, force in (("no_such_link", 1.0), ("", float("nan"))):
+        w = WrenchStamped()
+        w.header.frame_id = frame
+        w.wrench.force.x = force
+        h.wrench_pub.publish(w)
+    h.spin_until(lambda: h.sim.rejected_wrenches >= 2)
+    n = len(h.joint_states)
+    h.spin_until(lambda: len(h.joint_states) > n + 5)
+
+
+def test_wrench_pushes_the_base_and_reset_restores_the_start(harness_factory):
+    h = harness_factory(realtime_factor=0.0, push_duration=0.1)
+    h.wait_until_connected()
+    w = WrenchStamped()  # empty frame_id: the base
+    w.wrench.force.y = 40.0
+    h.wrench_pub.publish(w)
+    h.spin_until(lambda: h.sim.sim.state().q[1] > 0.005)
+    client = h.probe.create_client(Trigger, "/sim/reset")
+    assert client.wait_for_service(timeout_sec=5.0)
+    t_before = h.sim.sim.time
+    future = client.call_async(Trigger.Request())
+    h.spin_until(future.done)
+    assert future.result().success
+    st = h.sim.sim.state()
+    assert h.sim.sim.time >= t_before  # the clock never jumps back
+    assert abs(st.q[1]) < 0.002 and abs(st.q[2] - h.sim.sim.q_start[2]) < 0.002
+
+
+def test_realtime_factor_paces_sim_time(harness_factory):
+    h = harness_factory(realtime_factor=1.0)
+    h.spin_until(lambda: h.joint_states)
+    t0_wall, t0_sim = time.monotonic(), h.sim.sim.time
+    h.spin_until(lambda: time.monotonic() - t0_wall > 1.0)
+    rate = (h.sim.sim.time - t0_sim) / (time.monotonic() - t0_wall)
+    assert 0.8 < rate < 1.1
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_node_process_exits_cleanly_on_signals(sig):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "horizon_mpc.nodes.sim_node", "--ros-args", "-p",
+         "robot:=solo12"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True,
+    )
+    try:
+        for line in proc.stdout:  # wait for the node to be up
+            if "simulating solo12" in line:
+                break
+        time.sleep(0.3)
+        proc.send_signal(sig)
+        assert proc.wait(timeout=10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
