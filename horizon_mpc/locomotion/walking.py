@@ -44,6 +44,7 @@ class WalkingProblem:
     contacts: ContactTerms
     v_ref: Parameter  # (6,) base twist reference in the base frame
     pose_ref: Parameter  # (4,) x, y, cos(yaw), sin(yaw) reference
+    height_ref: Parameter  # (1,) base height reference (m, world z)
     q_nominal: np.ndarray  # standing configuration (nq,)
     base_height: float
 
@@ -116,9 +117,10 @@ def build_walking_problem(model: RobotModel, cfg: RobotConfig,
     # costs: base motion, posture, regularisation
     v_ref = prb.create_parameter("v_ref", 6)
     pose_ref = prb.create_parameter("pose_ref", 4)
+    height_ref = prb.create_parameter("height_ref", 1)
     R = base_rotation(q)
     prb.create_cost("base_velocity", v[:6] - v_ref)
-    prb.create_cost("base_height", q[2] - h_nom)
+    prb.create_cost("base_height", q[2] - height_ref)
     prb.create_cost("base_orientation", R[0:2, 2])  # body z-axis upright: roll, pitch
     prb.create_cost("base_position", q[0:2] - pose_ref[0:2])
     prb.create_cost("base_yaw", R[1, 0] * pose_ref[2] - R[0, 0] * pose_ref[3])  # sin(yaw-yaw_ref)
@@ -127,9 +129,11 @@ def build_walking_problem(model: RobotModel, cfg: RobotConfig,
     prb.create_cost("acceleration", a)
     prb.create_cost("forces", f)
     prb.create_final_cost("final_posture", q[7:] - q_nom[7:])
-    wp = WalkingProblem(prb, model, feet, st, q, v, a, f, contacts, v_ref, pose_ref, q_nom, h_nom)
+    wp = WalkingProblem(prb, model, feet, st, q, v, a, f, contacts, v_ref, pose_ref, height_ref,
+                        q_nom, h_nom)
     wp.set_weights(st.weights)
     pose_ref.assign([0.0, 0.0, 1.0, 0.0])
+    height_ref.assign(h_nom)
     wp.standing_guess(q_nom)
     contacts.set_schedule(np.ones((len(feet), st.n_nodes + 1), bool),
                           np.zeros((len(feet), st.n_nodes + 1)))

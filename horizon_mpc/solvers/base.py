@@ -82,7 +82,8 @@ class Solver:
 
     def set_option(self, key: str, value: Any) -> None:
         """Change one option between solves."""
-        self.opts.update(self._merge_options({key: value}))
+        self._merge_options({key: value})  # validates the name
+        self.opts[key] = value
 
     def solve(self) -> bool:
         """Solve from the current initial guesses; returns success."""

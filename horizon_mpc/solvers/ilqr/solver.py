@@ -105,7 +105,9 @@ class IlqrSolver(Solver):
         lb, ub = np.full((N, m.nc), -np.inf), np.full((N, m.nc), np.inf)
         i = 0
         for con in m.stage_cons:
-            act = con.active[:N]
+            act = con.active[:N].copy()
+            if self.x_init is not None and not con.uses_input:
+                act[0] = False  # a fixed initial state cannot be changed: nothing to enforce
             lb[act, i:i + con.dim] = con.lower_bounds[:, :N].T[act]
             ub[act, i:i + con.dim] = con.upper_bounds[:, :N].T[act]
             i += con.dim

@@ -1,0 +1,250 @@
+"""The walking MPC as a plain-Python controller (the ROS node wraps it).
+
+At every tick: measured state -> node-0 bounds; command -> clamped, ramped velocity
+reference and a reference pose integrated along it; gait -> contact schedule on the horizon
+nodes; warm start shifted by the elapsed time; real-time ILQR iteration(s); plan out.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from horizon_mpc.config import RobotConfig, load_robot_config
+from horizon_mpc.locomotion import MpcSettings, build_walking_problem, make_gait
+from horizon_mpc.model import RobotModel
+from horizon_mpc.mpc.schedule import GaitScheduler
+from horizon_mpc.solvers import make_solver
+
+__all__ = ["Plan", "WalkingMpc"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Plan:
+    """A solution of the walking problem, from the state measured at time ``t0``.
+
+    Shapes: q (nq, N+1), v (nv, N+1), a (nv, N), f (3 n_feet, N), tau (nv, N) (inverse
+    dynamics of the plan; ``tau[6:]`` are the joint torques), stance (n_feet, N+1).
+    """
+
+    t0: float
+    dt: float
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    f: np.ndarray
+    tau: np.ndarray
+    stance: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def times(self) -> np.ndarray:
+        """Node times relative to ``t0``, shape (N+1,)."""
+        return self.dt * np.arange(self.q.shape[1])
+
+
+class WalkingMpc:
+    """Receding-horizon whole-body walking with a warm-started ILQR.
+
+    Args:
+        cfg: robot config (or its name); its ``mpc:`` section gives the settings.
+        model: the symbolic model (built from the config when None).
+        settings: overrides the config's ``mpc:`` section.
+        iterations: ILQR iterations per tick (real-time iteration: 1).
+    """
+
+    def __init__(self, cfg: RobotConfig | str, model: RobotModel | None = None,
+                 settings: MpcSettings | None = None, iterations: int = 1):
+        self.cfg = load_robot_config(cfg) if isinstance(cfg, str) else cfg
+        if model is None:
+            model = (RobotModel.from_urdf(self.cfg.urdf_path) if self.cfg.urdf_path
+                     else RobotModel.from_example(self.cfg.robot))
+        self.model = model
+        self.settings = settings or MpcSettings.from_dict(self.cfg.section("mpc"))
+        t = time.perf_counter()
+        self.wp = build_walking_problem(model, self.cfg, self.settings)
+        self.solver = make_solver("ilqr", self.wp.prb, {
+            "rti": True, "iterations_per_call": int(iterations),
+            "rho_init": self.settings.rho_init})
+        self._id = model.compile(model.inverse_dynamics(self.wp.feet).map(self.wp.n_nodes))
+        self.build_time = time.perf_counter() - t
+        g = self.settings.gait
+        self.scheduler = GaitScheduler(make_gait(g.name, g.step_duration, g.step_height,
+                                                 g.duty_factor, len(self.wp.feet)),
+                                       stand_when_idle=self.settings.stand_when_idle)
+        self.cmd = np.zeros(3)  # ramped command: vx, vy, wz
+        self.pose_ref = np.zeros(3)  # x, y, yaw
+        self.t_last: float | None = None
+        self.ground_z = np.zeros(len(self.wp.feet))
+        self._standing: dict[str, np.ndarray] = {}
+        self.failures = 0
+        self.divergence_threshold = 1e3  # constraint violation above which a tick has failed
+
+    # ------------------------------------------------------------------ set-up
+    def start(self, q: np.ndarray, v: np.ndarray, t: float = 0.0,
+              max_iter: int = 50) -> Plan:
+        """Bootstrap: solve the standing problem at the measured state to convergence."""
+        wp = self.wp
+        q = self._clean_q(q)
+        fk = [self.model.fk(foot) for foot in wp.feet]
+        self.ground_z = np.array([float(fn(q)[0][2]) for fn in fk])
+        # feet frames may sit above the ground (foot radius): keep the height above them
+        lowest_nominal = min(float(fn(wp.q_nominal)[0][2]) for fn in fk)
+        wp.height_ref.assign(wp.base_height - lowest_nominal + float(np.mean(self.ground_z)))
+        self.pose_ref = np.array([q[0], q[1], _yaw(q)])
+        self.cmd[:] = 0.0
+        self.scheduler.reset(t)
+        wp.standing_guess(q)
+        self.solver.reset_multipliers()
+        self._set_state(q, v)
+        self._set_references(t)
+        self.solver.set_option("rti", False)
+        self.solver.set_option("max_iter", max_iter)
+        self.solver.solve()
+        self.solver.set_option("rti", True)
+        self._standing = {n: wp.prb.get_variable(n).initial_guess for n in ("q", "v", "a", "f")}
+        self.t_last = t
+        return self._plan(t)
+
+    # ------------------------------------------------------------------ tick
+    def update(self, t: float, q: np.ndarray, v: np.ndarray,
+               cmd: np.ndarray | None = None) -> Plan:
+        """One MPC tick at time ``t`` (s) from the measured ``q`` (nq), ``v`` (nv).
+
+        ``cmd``: desired base velocity ``(vx, vy, wz)`` in the base frame (None: zero).
+        """
+        if self.t_last is None:
+            return self.start(q, v, t)
+        q = self._clean_q(q)
+        dt_tick = max(t - self.t_last, 0.0)
+        self._ramp_command(np.zeros(3) if cmd is None else np.asarray(cmd, float), dt_tick)
+        self._advance_pose_ref(q, dt_tick)
+        n_shift = int(round(dt_tick / self.wp.settings.dt))
+        if n_shift > self.wp.n_nodes:
+            self._restore_standing(q)
+        else:
+            for _ in range(n_shift):
+                self.solver.shift()
+        self.t_last = t
+        self.scheduler.command(t, bool(np.any(np.abs(self.cmd) > 1e-3)) or bool(
+            cmd is not None and np.any(np.abs(cmd) > 1e-3)))
+        self._set_state(q, v)
+        self._set_references(t)
+        ok = self._solve()
+        if not ok:
+            self._restore_standing(q)
+            self._set_state(q, v)
+            self._set_references(t)
+        return self._plan(t)
+
+    def _solve(self) -> bool:
+        self.solver.solve()
+        sol = self.solver.solution
+        finite = bool(sol) and all(np.all(np.isfinite(sol[k])) for k in ("q", "v", "a", "f"))
+        diverged = self.solver.stats.constraint_violation > self.divergence_threshold
+        if finite and math.isfinite(self.solver.stats.cost) and not diverged:
+            self.failures = 0
+            return True
+        self.failures += 1
+        if self.failures == 1:
+            log.warning("ILQR failed (%s): back to the standing warm start",
+                        self.solver.stats.status)
+        return False
+
+    # ------------------------------------------------------------------ pieces
+    @staticmethod
+    def _clean_q(q: np.ndarray) -> np.ndarray:
+        q = np.array(q, dtype=float)
+        n = np.linalg.norm(q[3:7])
+        q[3:7] = q[3:7] / n if n > 1e-9 else (0.0, 0.0, 0.0, 1.0)
+        return q
+
+    def _set_state(self, q: np.ndarray, v: np.ndarray) -> None:
+        self.wp.q.set_bounds(q, q, nodes=0)
+        self.wp.v.set_bounds(v, v, nodes=0)
+        # the warm start's first node is the measured state (the gap closes in one step)
+        self.wp.q.set_initial_guess(q, nodes=0)
+        self.wp.v.set_initial_guess(v, nodes=0)
+
+    def _restore_standing(self, q: np.ndarray) -> None:
+        self.wp.standing_guess(q)
+        self.solver.reset_multipliers()
+
+    def _ramp_command(self, cmd: np.ndarray, dt: float) -> None:
+        st = self.settings
+        vmax = np.asarray(st.max_velocity, float)
+        target = np.clip(np.nan_to_num(cmd, nan=0.0, posinf=0.0, neginf=0.0), -vmax, vmax)
+        step = np.asarray(st.max_acceleration, float) * dt
+        self.cmd += np.clip(target - self.cmd, -step, step)
+
+    def _advance_pose_ref(self, q: np.ndarray, dt: float) -> None:
+        x, y, yaw = self.pose_ref
+        vx, vy, wz = self.cmd
+        c, s = math.cos(yaw), math.sin(yaw)
+        self.pose_ref = np.array([x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy),
+                                  yaw + dt * wz])
+        # never wind up: keep the reference within reach of the measured pose
+        err = self.pose_ref[:2] - q[:2]
+        dist = float(np.linalg.norm(err))
+        if dist > 0.15:
+            self.pose_ref[:2] = q[:2] + err * 0.15 / dist
+        yaw_err = _wrap(self.pose_ref[2] - _yaw(q))
+        self.pose_ref[2] = _yaw(q) + float(np.clip(yaw_err, -0.3, 0.3))
+
+    def _set_references(self, t: float) -> None:
+        wp, st = self.wp, self.settings
+        N, dt = wp.n_nodes, st.dt
+        vx, vy, wz = self.cmd
+        wp.v_ref.assign([vx, vy, 0.0, 0.0, 0.0, wz])
+        k = np.arange(N + 1) * dt
+        yaw = self.pose_ref[2] + wz * k
+        if abs(wz) > 1e-6:  # exact integration of a constant twist in the plane
+            sx = (np.sin(yaw) - math.sin(self.pose_ref[2])) / wz
+            cx = (np.cos(self.pose_ref[2]) - np.cos(yaw)) / wz
+            px = self.pose_ref[0] + vx * sx - vy * cx
+            py = self.pose_ref[1] + vx * cx + vy * sx
+        else:
+            c, s = math.cos(yaw[0]), math.sin(yaw[0])
+            px = self.pose_ref[0] + k * (c * vx - s * vy)
+            py = self.pose_ref[1] + k * (s * vx + c * vy)
+        wp.pose_ref.assign(np.vstack([px, py, np.cos(yaw), np.sin(yaw)]))
+        sched = self.scheduler.schedule(t, N, dt)
+        swing_z = self.ground_z[:, None] + sched.swing_height()
+        wp.contacts.set_schedule(sched.stance, swing_z)
+        self._stance = sched.stance
+
+    def _plan(self, t: float) -> Plan:
+        sol = self.solver.solution
+        tau = np.asarray(self._id(sol["q"][:, :-1], sol["v"][:, :-1], sol["a"], sol["f"]))
+        stats = self.solver.stats.as_dict()
+        stats.pop("history", None)
+        return Plan(t, self.settings.dt, sol["q"].copy(), sol["v"].copy(), sol["a"].copy(),
+                    sol["f"].copy(), tau, self._stance.copy(), stats)
+
+    # ------------------------------------------------------------------ live settings
+    def set_gait(self, name: str, step_duration: float | None = None,
+                 step_height: float | None = None, duty_factor: float | None = None) -> None:
+        """Switch gait (takes effect at the next tick)."""
+        g = self.settings.gait
+        g.name = name
+        g.step_duration = step_duration or g.step_duration
+        g.step_height = step_height if step_height is not None else g.step_height
+        g.duty_factor = duty_factor if duty_factor is not None else g.duty_factor
+        self.scheduler.gait = make_gait(g.name, g.step_duration, g.step_height,
+                                        None if name in ("stand",) else g.duty_factor,
+                                        len(self.wp.feet))
+
+
+def _yaw(q: np.ndarray) -> float:
+    x, y, z, w = q[3:7]
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi

@@ -1,0 +1,64 @@
+"""When to walk: the gait scheduler of the walking MPC.
+
+Walking starts when a non-zero command arrives; when the command returns to zero, every
+swing that has begun is finished and the feet then stay down (``stand_when_idle``).
+Times are absolute (s); the gait's phase is counted from the moment walking started.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from horizon_mpc.locomotion.gaits import ContactSchedule, Gait
+
+__all__ = ["GaitScheduler"]
+
+
+class GaitScheduler:
+    """Contact schedules of a gait that starts and stops on command."""
+
+    def __init__(self, gait: Gait, stand_when_idle: bool = True):
+        self.gait = gait
+        self.stand_when_idle = stand_when_idle
+        self.reset(0.0)
+
+    def reset(self, t: float) -> None:
+        """Standing, no walk in progress."""
+        self.t_start: float | None = None if self.stand_when_idle else t
+        self.t_stop: float | None = None
+
+    @property
+    def walking(self) -> bool:
+        """True between a start and the end of the last swing after a stop."""
+        return self.t_start is not None
+
+    def command(self, t: float, moving: bool) -> None:
+        """Tell the scheduler whether the robot is commanded to move at time ``t``."""
+        if not self.stand_when_idle or self.gait.name == "stand":
+            if self.t_start is None:
+                self.t_start = t
+            return
+        if moving:
+            if self.t_start is None:
+                self.t_start = t
+            self.t_stop = None
+        elif self.t_start is not None and self.t_stop is None:
+            self.t_stop = t
+        if self.t_stop is not None and t - self.t_stop > self.gait.step_duration + 1e-9:
+            self.t_start = self.t_stop = None
+
+    def schedule(self, t0: float, n_nodes: int, dt: float) -> ContactSchedule:
+        """The contact schedule on nodes ``t0 + k dt``, k = 0..n_nodes."""
+        g = self.gait
+        n_feet = len(g.offsets)
+        if self.t_start is None or g.name == "stand":
+            return ContactSchedule(np.ones((n_feet, n_nodes + 1), bool),
+                                   np.zeros((n_feet, n_nodes + 1)), g.step_height)
+        sched = g.schedule(t0 - self.t_start, n_nodes, dt)
+        if self.t_stop is not None:
+            t = t0 + dt * np.arange(n_nodes + 1)
+            lift_off = t[None, :] - sched.swing_progress * g.step_duration
+            late = (~sched.stance) & (lift_off > self.t_stop + 1e-9)
+            sched.stance = sched.stance | late
+            sched.swing_progress = np.where(late, 0.0, sched.swing_progress)
+        return sched
