@@ -1,0 +1,144 @@
+"""Validation of the MPC node's inputs: pure functions on ROS messages, no DDS needed.
+
+Each function returns the numbers the controller needs plus a list of *notes* (repairs it
+made, e.g. "normalised a quaternion of norm 1.2"), or raises ``ValueError`` naming what was
+wrong. The node turns notes into throttled warnings and errors into a rejected message
+(:mod:`horizon_mpc.nodes.mpc_node`, ``doc/mpc_node.md``). Conventions as in
+:mod:`horizon_mpc.nodes.conversions`: quaternions ``(x, y, z, w)``, twist in the base frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import JointState
+
+__all__ = [
+    "ABSURD_COMMAND",
+    "QUATERNION_TOLERANCE",
+    "base_from_odometry",
+    "command_from_twist",
+    "joints_from_joint_state",
+]
+
+#: |vx|, |vy| (m/s) or |wz| (rad/s) above this is not a velocity command but garbage.
+ABSURD_COMMAND = 10.0
+#: A quaternion whose norm is further than this from 1 is normalised with a note.
+QUATERNION_TOLERANCE = 1e-3
+
+
+def command_from_twist(
+    msg: Twist, limits: Sequence[float]
+) -> tuple[np.ndarray, list[str]]:
+    """``(vx, vy, wz)`` (m/s, m/s, rad/s, base frame) of a ``cmd_vel`` Twist, clamped.
+
+    Only ``linear.x``, ``linear.y`` and ``angular.z`` are used (a note says when the other
+    components are non-zero). Components beyond ``limits`` (3,) are clamped, with a note.
+
+    Raises:
+        ValueError: a non-finite component, or one beyond :data:`ABSURD_COMMAND`.
+    """
+    raw = np.array([msg.linear.x, msg.linear.y, msg.angular.z], dtype=float)
+    names = ("linear.x", "linear.y", "angular.z")
+    bad = [f"{n}={x}" for n, x in zip(names, raw, strict=True) if not math.isfinite(x)]
+    if bad:
+        raise ValueError(f"cmd_vel has non-finite components {', '.join(bad)}")
+    absurd = [f"{n}={x:g}" for n, x in zip(names, raw, strict=True) if abs(x) > ABSURD_COMMAND]
+    if absurd:
+        raise ValueError(f"cmd_vel components {', '.join(absurd)} exceed the plausible "
+                         f"{ABSURD_COMMAND:g} (m/s or rad/s)")
+    notes = []
+    others = np.array([msg.linear.z, msg.angular.x, msg.angular.y], dtype=float)
+    if np.any(others != 0.0):
+        notes.append("cmd_vel linear.z/angular.x/angular.y are ignored (planar command)")
+    lim = np.abs(np.asarray(limits, dtype=float))
+    cmd = np.clip(raw, -lim, lim)
+    if np.any(cmd != raw):
+        notes.append(f"cmd_vel {raw.tolist()} clamped to the limits {lim.tolist()}")
+    return cmd, notes
+
+
+def joints_from_joint_state(
+    msg: JointState, joint_names: Sequence[str]
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Joint positions and velocities (each (nj,), order of ``joint_names``), matched by name.
+
+    Repaired with a note: extra joints (ignored), no velocities (zeros), non-finite
+    velocities (zeros). Reordered joints are simply matched by name.
+
+    Raises:
+        ValueError: a missing or duplicated joint, a position/velocity array whose length
+            differs from ``msg.name``, or a non-finite position.
+    """
+    names = list(msg.name)
+    index: dict[str, int] = {}
+    duplicates = set()
+    for i, n in enumerate(names):
+        if n in index:
+            duplicates.add(n)
+        index[n] = i
+    missing = [n for n in joint_names if n not in index]
+    if missing:
+        raise ValueError(f"JointState lacks joints {missing}")
+    needed_duplicates = sorted(duplicates & set(joint_names))
+    if needed_duplicates:
+        raise ValueError(f"JointState names joints {needed_duplicates} more than once")
+    pos = np.asarray(msg.position, dtype=float)
+    vel = np.asarray(msg.velocity, dtype=float)
+    if pos.shape != (len(names),):
+        raise ValueError(f"JointState.position has {pos.size} values for {len(names)} names")
+    if vel.size and vel.shape != (len(names),):
+        raise ValueError(f"JointState.velocity has {vel.size} values for {len(names)} names")
+    idx = [index[n] for n in joint_names]
+    notes = []
+    extra = sorted(set(names) - set(joint_names))
+    if extra:
+        notes.append(f"JointState joints {extra} are not in the model; ignored")
+    qj = pos[idx]
+    bad = [n for n, x in zip(joint_names, qj, strict=True) if not math.isfinite(x)]
+    if bad:
+        raise ValueError(f"JointState has non-finite positions for {bad}")
+    if not vel.size:
+        notes.append("JointState has no velocities; using zeros")
+        return qj, np.zeros(len(idx)), notes
+    vj = vel[idx]
+    bad = [n for n, x in zip(joint_names, vj, strict=True) if not math.isfinite(x)]
+    if bad:
+        notes.append(f"JointState has non-finite velocities for {bad}; using zeros for those")
+        vj = np.where(np.isfinite(vj), vj, 0.0)
+    return qj, vj, notes
+
+
+def base_from_odometry(
+    msg: Odometry,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """``(position (3,), quaternion (4,) unit, linear (3,), angular (3,), notes)`` of odom.
+
+    The pose is in the world (``header.frame_id``), the twist in the base frame
+    (``child_frame_id``), REP 105. A quaternion whose norm differs from 1 by more than
+    :data:`QUATERNION_TOLERANCE` is normalised with a note.
+
+    Raises:
+        ValueError: a non-finite pose or twist component, or a (near-)zero quaternion.
+    """
+    p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
+    pos = np.array([p.x, p.y, p.z], dtype=float)
+    quat = np.array([o.x, o.y, o.z, o.w], dtype=float)
+    v_lin = np.array([lin.x, lin.y, lin.z], dtype=float)
+    v_ang = np.array([ang.x, ang.y, ang.z], dtype=float)
+    for what, arr in (("position", pos), ("orientation", quat), ("linear twist", v_lin),
+                      ("angular twist", v_ang)):
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"Odometry {what} is not finite: {arr.tolist()}")
+    norm = float(np.linalg.norm(quat))
+    if norm < 1e-6:
+        raise ValueError(f"Odometry orientation is a zero quaternion {quat.tolist()}")
+    notes = []
+    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
+        notes.append(f"Odometry orientation has norm {norm:.6g}; normalised")
+    return pos, quat / norm, v_lin, v_ang, notes

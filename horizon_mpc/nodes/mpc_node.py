@@ -1,0 +1,449 @@
+"""``ros2 run horizon_mpc mpc_node``: the walking MPC (:class:`WalkingMpc`) as a ROS 2 node.
+
+Topics, parameters, timing and the bad-input policy are documented in ``doc/mpc_node.md``.
+In short: subscribes ``joint_states``, ``odom`` (twist in the base frame, REP 105) and
+``cmd_vel``; publishes ``joint_trajectory`` stamped with the stamp of the state the plan was
+computed from, ``/diagnostics`` and ``~/predicted_base_path``. ``trigger: state`` ticks once
+per new (joint_states, odom) pair with equal stamps, which is what the simulator's lockstep
+mode needs; ``trigger: timer`` ticks at ``control_rate`` on the node's clock.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import signal
+import threading
+import time
+from collections.abc import Sequence
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry, Path
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from horizon_mpc.config import load_robot_config
+from horizon_mpc.locomotion import MpcSettings
+from horizon_mpc.locomotion.gaits import GAITS
+from horizon_mpc.locomotion.settings import Weights
+from horizon_mpc.mpc.controller import Plan, WalkingMpc
+from horizon_mpc.nodes.conversions import (
+    NS_PER_S,
+    duration_from_seconds,
+    time_from_ns,
+    time_to_ns,
+)
+from horizon_mpc.nodes.mpc_inputs import (
+    base_from_odometry,
+    command_from_twist,
+    joints_from_joint_state,
+)
+
+__all__ = ["MpcNode", "main"]
+
+_WARN_PERIOD = 2.0  # s (wall) between two warnings of the same kind
+_WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
+_LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
+_LIVE_LIMITS = ("max_vx", "max_vy", "max_wz")
+
+
+def _range(lo: float, hi: float) -> list[FloatingPointRange]:
+    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+
+
+class MpcNode(Node):
+    """The MPC node. Construct after ``rclpy.init()``; spin it with any executor.
+
+    ``mpc``: an already built controller to wrap (tests reuse one); its robot must match the
+    ``robot``/``config`` parameter. Otherwise the node builds one (seconds, logged).
+    """
+
+    def __init__(
+        self,
+        node_name: str = "mpc",
+        *,
+        parameter_overrides: Sequence[Parameter] | None = None,
+        mpc: WalkingMpc | None = None,
+        **kwargs: object,
+    ) -> None:
+        super().__init__(node_name, parameter_overrides=list(parameter_overrides or []),
+                         **kwargs)
+        self._declare("robot", "go2", "robot config name (config/<robot>.yaml)", ro=True)
+        self._declare("config", "", "path of a robot config YAML (overrides 'robot')", ro=True)
+        cfg = load_robot_config(self._p("config") or self._p("robot"))
+        settings = mpc.settings if mpc is not None else MpcSettings.from_dict(cfg.section("mpc"))
+        self._declare_parameters(settings)
+        g = settings.gait
+        g.name, g.step_duration = self._p("gait"), self._p("step_duration")
+        g.step_height, g.duty_factor = self._p("step_height"), self._p("duty_factor")
+        settings.max_velocity = [self._p(n) for n in _LIVE_LIMITS]
+        settings.weights = self._weights_from_parameters(settings.weights)
+
+        t = time.perf_counter()
+        if mpc is None:
+            mpc = WalkingMpc(cfg, settings=settings, iterations=self._p("iterations"))
+        else:
+            mpc.set_gait(g.name, g.step_duration, g.step_height, g.duty_factor)
+            mpc.wp.set_weights(settings.weights)
+        self.mpc = mpc
+        self.get_logger().info(
+            f"built the {cfg.name} walking MPC in {time.perf_counter() - t:.2f} s "
+            f"({settings.n_nodes} nodes x {settings.dt:g} s, {self._p('iterations')} "
+            f"iteration(s)/tick, gait {g.name})")
+        self.joint_names = list(mpc.model.joint_names)
+        if mpc.model.nq != 7 + len(self.joint_names):
+            raise ValueError("mpc_node needs one q entry per joint (no continuous joints)")
+        self.period = 1.0 / self._p("control_rate")
+        self.state_timeout = self._p("state_timeout")
+        self.cmd_timeout = self._p("cmd_timeout")
+        self.publish_points = min(self._p("publish_points"), settings.n_nodes)
+        self.trigger = self._p("trigger")
+
+        # latest accepted inputs: (stamp ns, arrays...) / (receipt time s, cmd)
+        self._joints: tuple[int, np.ndarray, np.ndarray] | None = None
+        self._base: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._cmd: tuple[float, np.ndarray] | None = None
+        self._cmd_timed_out = True
+        self._last_tick_stamp: int | None = None
+        self.plan: Plan | None = None
+        self.ticks = 0
+        self.deadline_misses = 0
+        self.stale_skips = 0
+        self.solver_errors = 0
+        self.rejected = {"joint_states": 0, "odom": 0, "cmd_vel": 0}
+        self.last_solve_time = math.nan
+        self.last_state_age = math.nan
+        self._last_warn: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+
+        self._pub_traj = self.create_publisher(JointTrajectory, "joint_trajectory", 10)
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._pub_path = self.create_publisher(Path, "~/predicted_base_path", 10)
+        self.create_subscription(JointState, "joint_states", self._on_joint_state, 10)
+        self.create_subscription(Odometry, "odom", self._on_odom, 10)
+        self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        if self.trigger == "timer":
+            self._timer = self.create_timer(self.period, self.tick)
+        self.get_logger().info(f"waiting for joint_states and odom (trigger: {self.trigger})")
+
+    # ------------------------------------------------------------------ parameters
+    def _declare(self, name: str, default: object, description: str,
+                 rng: list[FloatingPointRange] | None = None,
+                 irng: list[IntegerRange] | None = None, ro: bool = False) -> None:
+        desc = ParameterDescriptor(description=description, read_only=ro)
+        if rng:
+            desc.floating_point_range = rng
+        if irng:
+            desc.integer_range = irng
+        self.declare_parameter(name, default, desc)
+
+    def _declare_parameters(self, st: MpcSettings) -> None:
+        d = self._declare
+        d("control_rate", 1.0 / st.dt, "MPC ticks per second of the node clock (trigger timer)",
+          _range(1, 1000), ro=True)
+        d("iterations", 2, "ILQR iterations per tick", irng=[IntegerRange(
+            from_value=1, to_value=50, step=1)], ro=True)
+        d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
+          "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)
+        d("gait", st.gait.name, f"gait ({', '.join(GAITS)}); live")
+        d("step_duration", float(st.gait.step_duration), "swing duration (s); live",
+          _range(0.05, 2.0))
+        d("step_height", float(st.gait.step_height), "swing apex height (m); live",
+          _range(0.0, 0.3))
+        d("duty_factor", float(st.gait.duty_factor), "stance fraction of a cycle; live",
+          _range(0.05, 1.0))
+        for name, vmax, unit in zip(_LIVE_LIMITS, st.max_velocity, ("m/s", "m/s", "rad/s"),
+                                    strict=True):
+            d(name, float(vmax), f"|{name[4:]}| command limit ({unit}); live", _range(0, 5))
+        for name in _WEIGHT_FIELDS:
+            value = getattr(st.weights, name)
+            value = [float(x) for x in value] if isinstance(value, list) else float(value)
+            d(f"w_{name}", value, f"cost weight '{name}' (see MpcSettings.weights); live")
+        d("cmd_timeout", 0.5, "a cmd_vel older than this (s, node clock) means zero command",
+          _range(0.01, 60))
+        d("state_timeout", 0.2, "no plan from a state older than this (s, node clock)",
+          _range(0.001, 60))
+        d("publish_points", 6, "trajectory points published per plan (nodes 0..n-1)",
+          irng=[IntegerRange(from_value=1, to_value=1000, step=1)])
+        self._check_trigger(self._p("trigger"))
+
+    @staticmethod
+    def _check_trigger(trigger: str) -> None:
+        if trigger not in ("timer", "state"):
+            raise ValueError(f"trigger must be 'timer' or 'state', got {trigger!r}")
+
+    def _p(self, name: str) -> object:
+        return self.get_parameter(name).value
+
+    def _weights_from_parameters(self, base: Weights, changed: dict | None = None) -> Weights:
+        values = {n: (changed or {}).get(f"w_{n}", self._p(f"w_{n}")) for n in _WEIGHT_FIELDS}
+        values = {n: list(v) if isinstance(v, (list, tuple, np.ndarray)) else float(v)
+                  for n, v in values.items()}
+        return dataclasses.replace(base, **values)
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """Validate and apply live changes (gait, limits, weights) between two ticks."""
+        new = {p.name: p.value for p in params}
+        for name, value in new.items():
+            if name == "gait" and value not in GAITS:
+                return SetParametersResult(successful=False,
+                                           reason=f"unknown gait {value!r}; gaits: {list(GAITS)}")
+            if name.startswith("w_"):
+                old = self._p(name)
+                arr = np.atleast_1d(np.asarray(value, dtype=float))
+                if arr.size != np.atleast_1d(old).size or not np.all(np.isfinite(arr)) \
+                        or np.any(arr < 0):
+                    return SetParametersResult(
+                        successful=False, reason=f"{name} needs {np.atleast_1d(old).size} "
+                        f"finite non-negative value(s), got {value!r}")
+        st = self.mpc.settings
+        if any(n in new for n in _LIVE_GAIT):
+            g = {n: new.get(n, self._p(n)) for n in _LIVE_GAIT}
+            try:
+                self.mpc.set_gait(g["gait"], g["step_duration"], g["step_height"],
+                                  g["duty_factor"])
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        if any(n in new for n in _LIVE_LIMITS):
+            st.max_velocity = [float(new.get(n, self._p(n))) for n in _LIVE_LIMITS]
+        if any(n.startswith("w_") for n in new):
+            st.weights = self._weights_from_parameters(st.weights, new)
+            self.mpc.wp.set_weights(st.weights)
+        if new:
+            self.get_logger().info(f"parameters updated live: {sorted(new)}")
+        return SetParametersResult(successful=True)
+
+    # ------------------------------------------------------------------ helpers
+    def now(self) -> float:
+        """Node clock (s): ROS time, i.e. sim time when ``use_sim_time`` is set."""
+        return self.get_clock().now().nanoseconds / NS_PER_S
+
+    def _warn(self, kind: str, text: str) -> None:
+        """A warning throttled per ``kind``; says how many were suppressed meanwhile."""
+        wall = time.monotonic()
+        if wall - self._last_warn.get(kind, -math.inf) < _WARN_PERIOD:
+            self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
+            return
+        n = self._suppressed.pop(kind, 0)
+        self._last_warn[kind] = wall
+        self.get_logger().warning(text + (f" ({n} similar warnings suppressed)" if n else ""))
+
+    @property
+    def command(self) -> np.ndarray:
+        """The command used now: the last cmd_vel, or zero once it is older than cmd_timeout."""
+        if self._cmd is None or self.now() - self._cmd[0] > self.cmd_timeout:
+            if self._cmd is not None and not self._cmd_timed_out:
+                self._warn("cmd_timeout", f"no cmd_vel for more than {self.cmd_timeout:g} s; "
+                           "commanding zero velocity")
+            self._cmd_timed_out = True
+            return np.zeros(3)
+        self._cmd_timed_out = False
+        return self._cmd[1]
+
+    # ------------------------------------------------------------------ inputs
+    def _on_joint_state(self, msg: JointState) -> None:
+        try:
+            qj, vj, notes = joints_from_joint_state(msg, self.joint_names)
+        except ValueError as exc:
+            self.rejected["joint_states"] += 1
+            self._warn("joint_states", f"rejected joint_states: {exc}")
+            return
+        for note in notes:
+            self._warn("joint_states_note", note)
+        self._joints = (time_to_ns(msg.header.stamp), qj, vj)
+        self._maybe_tick_on_state()
+
+    def _on_odom(self, msg: Odometry) -> None:
+        try:
+            pos, quat, lin, ang, notes = base_from_odometry(msg)
+        except ValueError as exc:
+            self.rejected["odom"] += 1
+            self._warn("odom", f"rejected odom: {exc}")
+            return
+        for note in notes:
+            self._warn("odom_note", note)
+        self._base = (time_to_ns(msg.header.stamp), pos, quat, lin, ang)
+        self._maybe_tick_on_state()
+
+    def _on_cmd_vel(self, msg: Twist) -> None:
+        try:
+            cmd, notes = command_from_twist(msg, self.mpc.settings.max_velocity)
+        except ValueError as exc:
+            self.rejected["cmd_vel"] += 1
+            self._warn("cmd_vel", f"rejected cmd_vel: {exc}; keeping the previous command")
+            return
+        for note in notes:
+            self._warn("cmd_vel_note", note)
+        self._cmd = (self.now(), cmd)
+
+    def _maybe_tick_on_state(self) -> None:
+        if self.trigger == "state" and self._joints is not None and self._base is not None \
+                and self._joints[0] == self._base[0]:
+            self.tick()
+
+    # ------------------------------------------------------------------ the tick
+    def tick(self) -> bool:
+        """One MPC tick on the latest state; returns whether a trajectory was published.
+
+        Ticks never queue: a tick on a state already used does nothing, and an overrun
+        (solve longer than the control period) only counts a deadline miss.
+        """
+        if self._joints is None or self._base is None:
+            missing = [n for n, x in (("joint_states", self._joints), ("odom", self._base))
+                       if x is None]
+            self._warn("no_state", f"no {' and no '.join(missing)} received yet; not planning")
+            return False
+        stamp_ns = min(self._joints[0], self._base[0])
+        if stamp_ns == self._last_tick_stamp:
+            return False
+        t = stamp_ns / NS_PER_S
+        self.last_state_age = self.now() - t
+        if self.last_state_age > self.state_timeout:
+            self.stale_skips += 1
+            self._warn("stale", f"the state is {self.last_state_age:.3f} s old (state_timeout "
+                       f"{self.state_timeout:g} s); not planning")
+            self._publish_diagnostics(None, stamp_ns)
+            return False
+        _, qj, vj = self._joints
+        _, pos, quat, lin, ang = self._base
+        q = np.concatenate((pos, quat, qj))
+        v = np.concatenate((lin, ang, vj))
+        cmd = self.command
+        self._last_tick_stamp = stamp_ns
+        wall = time.perf_counter()
+        try:
+            if self.plan is None:
+                plan = self.mpc.start(q, v, t)
+                self.get_logger().info(f"bootstrapped at t = {t:.3f} s in "
+                                       f"{time.perf_counter() - wall:.2f} s; ticking")
+            else:
+                plan = self.mpc.update(t, q, v, cmd)
+        except Exception as exc:  # noqa: BLE001 - the node must outlive any solver error
+            self.solver_errors += 1
+            self._warn("solver", f"MPC tick failed ({type(exc).__name__}: {exc}); "
+                       "keeping the last trajectory")
+            return False
+        self.last_solve_time = time.perf_counter() - wall
+        if self.plan is not None and self.last_solve_time > self.period:
+            self.deadline_misses += 1
+            self._warn("deadline", f"tick took {self.last_solve_time * 1e3:.1f} ms > period "
+                       f"{self.period * 1e3:.1f} ms ({self.deadline_misses} misses)")
+        self.plan = plan
+        self.ticks += 1
+        self._pub_traj.publish(self.trajectory_msg(plan, stamp_ns))
+        self._pub_path.publish(self.path_msg(plan, stamp_ns))
+        self._publish_diagnostics(plan, stamp_ns)
+        return True
+
+    # ------------------------------------------------------------------ outputs
+    def trajectory_msg(self, plan: Plan, stamp_ns: int) -> JointTrajectory:
+        """The first ``publish_points`` nodes of ``plan`` (joints in model order)."""
+        msg = JointTrajectory()
+        msg.header.stamp = time_from_ns(stamp_ns)
+        msg.joint_names = self.joint_names
+        n = min(self.publish_points, plan.a.shape[1])
+        q, v, a, tau = plan.q[7:, :n].T, plan.v[6:, :n].T, plan.a[6:, :n].T, plan.tau[6:, :n].T
+        for k in range(n):
+            pt = JointTrajectoryPoint()
+            pt.positions, pt.velocities = q[k].tolist(), v[k].tolist()
+            pt.accelerations, pt.effort = a[k].tolist(), tau[k].tolist()
+            pt.time_from_start = duration_from_seconds(k * plan.dt)
+            msg.points.append(pt)
+        return msg
+
+    def path_msg(self, plan: Plan, stamp_ns: int) -> Path:
+        """The planned base poses of every node, frame ``odom``."""
+        msg = Path()
+        msg.header.stamp = time_from_ns(stamp_ns)
+        msg.header.frame_id = "odom"
+        for k in range(plan.q.shape[1]):
+            ps = PoseStamped()
+            ps.header.frame_id = "odom"
+            ps.header.stamp = time_from_ns(stamp_ns + round(k * plan.dt * NS_PER_S))
+            x, y, z, qx, qy, qz, qw = (float(c) for c in plan.q[:7, k])
+            ps.pose.position.x, ps.pose.position.y, ps.pose.position.z = x, y, z
+            o = ps.pose.orientation
+            o.x, o.y, o.z, o.w = qx, qy, qz, qw
+            msg.poses.append(ps)
+        return msg
+
+    def gait_phase(self, t: float) -> float:
+        """Phase in [0, 1) of the gait cycle at ``t`` (NaN while standing)."""
+        sch = self.mpc.scheduler
+        period = sch.gait.period
+        if sch.t_start is None or not math.isfinite(period):
+            return math.nan
+        return ((t - sch.t_start) / period) % 1.0
+
+    def _publish_diagnostics(self, plan: Plan | None, stamp_ns: int) -> None:
+        status = DiagnosticStatus(name=f"{self.get_name()}: walking MPC",
+                                  hardware_id=self.mpc.cfg.name)
+        if plan is None:
+            status.level, status.message = DiagnosticStatus.WARN, "stale state: not planning"
+            stats = {}
+        else:
+            stats = plan.stats
+            ok = bool(stats.get("success", True)) and self.mpc.failures == 0
+            status.level = DiagnosticStatus.OK if ok else DiagnosticStatus.WARN
+            status.message = "ok" if ok else f"solver: {stats.get('status')}"
+        values = {
+            "solve_time_ms": self.last_solve_time * 1e3,
+            "iterations": stats.get("iterations", math.nan),
+            "cost": stats.get("cost", math.nan),
+            "constraint_violation": stats.get("constraint_violation", math.nan),
+            "deadline_misses": self.deadline_misses,
+            "state_age_ms": self.last_state_age * 1e3,
+            "gait": self.mpc.settings.gait.name,
+            "gait_phase": self.gait_phase(stamp_ns / NS_PER_S),
+            "command": np.round(self.mpc.cmd, 4).tolist(),
+            "ticks": self.ticks,
+            "stale_skips": self.stale_skips,
+            "rejected": self.rejected,
+        }
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = time_from_ns(stamp_ns)
+        self._pub_diag.publish(msg)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of ``ros2 run horizon_mpc mpc_node``; exit code 0 on SIGINT/SIGTERM."""
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set())
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node: MpcNode | None = None
+    executor = SingleThreadedExecutor()
+    try:
+        node = MpcNode()
+        executor.add_node(node)
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
