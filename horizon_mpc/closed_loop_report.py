@@ -1,0 +1,178 @@
+"""Metrics, plots and GIF of a closed-loop run (:mod:`horizon_mpc.closed_loop`).
+
+Velocities are compared in the BASE frame (the frame of ``cmd_vel``): ``v[0:2]`` of the
+Pinocchio velocity and the base-frame yaw rate ``v[5]``. Metrics are defined in
+``doc/closed_loop.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from horizon_mpc.closed_loop import Recording, Segment
+
+__all__ = ["fallen", "roll_pitch_yaw", "summarise", "write_report"]
+
+SETTLING = 1.0  # s after a segment starts before its tracking error counts
+FALL_HEIGHT = 0.6  # fraction of the nominal base height below which the robot has fallen
+FALL_TILT = 0.5  # rad of |roll| or |pitch| beyond which the robot has fallen
+FRAME_PERIOD = 0.05  # s of sim time between two GIF frames (real-time playback)
+AXES = ("vx", "vy", "wz")
+
+
+def roll_pitch_yaw(quat: np.ndarray) -> np.ndarray:
+    """(..., 3) roll, pitch, yaw (rad, ZYX) of (..., 4) quaternions ``(x, y, z, w)``."""
+    x, y, z, w = np.moveaxis(np.asarray(quat, dtype=float), -1, 0)
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def fallen(q: np.ndarray, nominal_height: float) -> bool:
+    """Base below ``FALL_HEIGHT`` x nominal height, or |roll| or |pitch| above ``FALL_TILT``."""
+    roll, pitch, _ = roll_pitch_yaw(q[3:7])
+    return bool(q[2] < FALL_HEIGHT * nominal_height or abs(roll) > FALL_TILT
+                or abs(pitch) > FALL_TILT)
+
+
+def _percentiles(x: np.ndarray) -> dict[str, float]:
+    if x.size == 0:
+        return {"median": math.nan, "p95": math.nan, "max": math.nan}
+    return {"median": float(np.median(x) * 1e3), "p95": float(np.percentile(x, 95) * 1e3),
+            "max": float(np.max(x) * 1e3)}
+
+
+def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep",
+              robot: str = "") -> dict:
+    """The metrics of ``rec`` as a JSON-ready dict (times s, speeds m/s and rad/s)."""
+    d = rec.arrays()
+    t, q, v = d["t"], d["q"], d["v"]
+    actual = np.column_stack([v[:, 0], v[:, 1], v[:, 5]])
+    segs, start = [], 0.0
+    for i, seg in enumerate(segments):
+        end = start + seg.duration
+        mask = (t >= start + SETTLING - 1e-9) & (t < end - 1e-9)
+        cmd = np.array([seg.vx, seg.vy, seg.wz])
+        entry = {"index": i, "start": start, "end": end, "command": dict(zip(AXES, cmd.tolist(),
+                                                                             strict=True)),
+                 "samples": int(mask.sum())}
+        if mask.any():
+            err = actual[mask] - cmd
+            entry["rmse"] = dict(zip(AXES, np.sqrt(np.mean(err**2, axis=0)).tolist(),
+                                     strict=True))
+            entry["mean"] = dict(zip(AXES, actual[mask].mean(axis=0).tolist(), strict=True))
+        segs.append(entry)
+        start = end
+    fall_flags = np.array([fallen(qi, rec.nominal_height) for qi in q]) if len(q) else \
+        np.zeros(0, bool)
+    # a fall = an onset of the fallen condition
+    onsets = np.flatnonzero(fall_flags & ~np.concatenate(([False], fall_flags[:-1])))
+    xy = q[:, :2] if len(q) else np.zeros((0, 2))
+    sim_time = float(t[-1] - t[0]) if len(t) > 1 else 0.0
+    tick = d["tick_time"]
+    rpy = roll_pitch_yaw(q[:, 3:7]) if len(q) else np.zeros((0, 3))
+    return {
+        "robot": robot,
+        "mode": mode,
+        "sim_time": sim_time,
+        "wall_time": rec.wall_time,
+        "real_time_factor": sim_time / rec.wall_time if rec.wall_time > 0 else math.nan,
+        "mpc_build_time": rec.build_time,
+        "segments": segs,
+        "distance_travelled": float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1))),
+        "net_displacement": (xy[-1] - xy[0]).tolist() if len(xy) else [0.0, 0.0],
+        "yaw_change": float(np.unwrap(rpy[:, 2])[-1] - rpy[0, 2]) if len(rpy) else 0.0,
+        "falls": {"count": int(onsets.size), "times": t[onsets].tolist(),
+                  "criteria": f"base height < {FALL_HEIGHT} x {rec.nominal_height:.3f} m or "
+                              f"|roll|, |pitch| > {FALL_TILT} rad"},
+        "min_base_height": float(q[:, 2].min()) if len(q) else math.nan,
+        "max_abs_roll_pitch": float(np.abs(rpy[:, :2]).max()) if len(rpy) else math.nan,
+        "ticks": int(tick.size),
+        "tick_time_ms": _percentiles(tick),
+        "deadline_misses": rec.deadline_misses,
+        "gif_frames": len(rec.frames),
+    }
+
+
+def write_report(rec: Recording, summary: dict, out: str | Path) -> list[Path]:
+    """Write summary.json, the PNG plots and (if frames were rendered) run.gif into ``out``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = [out / "summary.json"]
+    written[0].write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    d = rec.arrays()
+    t = d["t"]
+    if len(t) == 0:
+        return written
+    q, v = d["q"], d["v"]
+
+    def save(fig, name: str) -> None:
+        fig.tight_layout()
+        fig.savefig(out / name, dpi=100)
+        plt.close(fig)
+        written.append(out / name)
+
+    fig, axs = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    actual = np.column_stack([v[:, 0], v[:, 1], v[:, 5]])
+    for i, (ax, name, unit) in enumerate(zip(axs, AXES, ("m/s", "m/s", "rad/s"), strict=True)):
+        ax.plot(t, d["cmd"][:, i], "k--", label="commanded")
+        ax.plot(t, d["cmd_mpc"][:, i], color="0.6", label="MPC reference (ramped)")
+        ax.plot(t, actual[:, i], label="actual (base frame)")
+        ax.set_ylabel(f"{name} ({unit})")
+        ax.grid(alpha=0.3)
+    axs[0].legend(loc="upper right", fontsize=8)
+    axs[-1].set_xlabel("sim time (s)")
+    save(fig, "velocity_tracking.png")
+
+    rpy = roll_pitch_yaw(q[:, 3:7])
+    fig, axs = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    axs[0].plot(t, q[:, 2], label="base height")
+    axs[0].axhline(FALL_HEIGHT * rec.nominal_height, color="r", ls=":", label="fall threshold")
+    axs[0].set_ylabel("z (m)")
+    axs[0].legend(fontsize=8)
+    for i, name in enumerate(("roll", "pitch", "yaw")):
+        axs[1].plot(t, rpy[:, i], label=name)
+    axs[1].set_ylabel("rad")
+    axs[1].set_xlabel("sim time (s)")
+    axs[1].legend(fontsize=8)
+    for ax in axs:
+        ax.grid(alpha=0.3)
+    save(fig, "base_pose.png")
+
+    contact = d["contact"].astype(float)
+    fig, ax = plt.subplots(figsize=(9, 2.5))
+    ax.imshow(contact.T, aspect="auto", interpolation="nearest", cmap="Greys",
+              extent=(t[0], t[-1], contact.shape[1] - 0.5, -0.5))
+    ax.set_yticks(range(contact.shape[1]), rec.feet or range(contact.shape[1]))
+    ax.set_xlabel("sim time (s)")
+    ax.set_title("foot contacts (black = contact)")
+    save(fig, "contacts.png")
+
+    fig, ax = plt.subplots(figsize=(9, 3))
+    ax.plot(d["tick_t"], d["tick_time"] * 1e3, ".", ms=3)
+    ax.axhline(1e3 * (t[1] - t[0]) if len(t) > 1 else 20.0, color="r", ls=":",
+               label="control period")
+    ax.set_xlabel("sim time (s)")
+    ax.set_ylabel("solve time (ms)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    save(fig, "solve_time.png")
+
+    if rec.frames:
+        from horizon_mpc.sim.render import write_gif
+
+        written.append(write_gif(out / "run.gif", rec.frames, fps=1.0 / FRAME_PERIOD))
+    return written
