@@ -107,7 +107,8 @@ def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q, v, f, mu: 
     return terms
 
 
-def add_torque_limits(prb: Problem, model: RobotModel, tau_joints, scale: float = 1.0) -> Constraint:
+def add_torque_limits(prb: Problem, model: RobotModel, tau_joints,
+                      scale: float = 1.0) -> Constraint:
     """Joint torques (from inverse dynamics) within ``scale`` times the URDF effort limits."""
     lim = scale * model.joint_effort_limit
     lim = np.where(np.isfinite(lim), lim, np.inf)

@@ -70,7 +70,7 @@ class ContactSchedule:
 
 
 def swing_height_profile(s: np.ndarray, height: float) -> np.ndarray:
-    """Height ``16 h s^2 (1 - s)^2``: 0 with zero velocity at lift-off and touch-down, h at s=1/2."""
+    """Height ``16 h s^2 (1 - s)^2``: 0 with zero slope at lift-off and touch-down, h at 1/2."""
     s = np.clip(s, 0.0, 1.0)
     return 16.0 * height * s * s * (1.0 - s) ** 2
 

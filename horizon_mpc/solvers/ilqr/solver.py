@@ -196,6 +196,8 @@ class IlqrSolver(Solver):
         t1 = time.perf_counter()
         info = {"mu": self.mu, "alpha": 0.0, "accepted": 0.0}
         if q is None:
+            if self.mu >= o["mu_max"]:
+                info["linearisation_failed"] = 1.0
             self.mu = min(max(self.mu * 100, 1e-6), o["mu_max"])
             info["status_nan"] = 1.0
             return ev, info
@@ -290,6 +292,9 @@ class IlqrSolver(Solver):
                 break
             if info.get("backward_failed"):
                 status = "regularisation limit reached"
+                break
+            if info.get("linearisation_failed"):
+                status = "linearisation not finite (NaN/Inf) at every regularisation"
                 break
             if o["time_budget"] is not None and time.perf_counter() - t_start > o["time_budget"]:
                 status = "time budget"

@@ -1,0 +1,189 @@
+"""ILQR: exactness on LQ problems, agreement with IPOPT, gap closing, honest refusals."""
+
+import casadi as cs
+import numpy as np
+import pytest
+
+from horizon_mpc import Problem, make_solver
+from horizon_mpc.examples.cartpole import build_cartpole
+
+OPTS = {"codegen": False, "max_iter": 400}
+
+
+def _lq_problem(n=20):
+    prb = Problem(n)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.vertcat(x[1], u))
+    prb.set_dt(0.1)
+    prb.transcribe("multiple_shooting", integrator="euler")
+    x.set_bounds([1.0, 0.0], [1.0, 0.0], nodes=0)
+    prb.create_cost("effort", u, weight=0.1)
+    prb.create_cost("state", x, weight=1.0)
+    return prb, x, u
+
+
+def _riccati_reference(n=20, dt=0.1):
+    """The LQ optimum by a dense KKT solve (independent of the solver's recursion)."""
+    A = np.array([[1.0, dt], [0.0, 1.0]])
+    B = np.array([[0.0], [dt]])
+    nx, nu = 2, 1
+    nz = nx * (n + 1) + nu * n
+    H = np.zeros((nz, nz))
+    for k in range(n + 1):
+        H[nx * k:nx * k + nx, nx * k:nx * k + nx] = 2 * np.eye(nx)
+    off = nx * (n + 1)
+    for k in range(n):
+        H[off + k, off + k] = 0.2
+    rows = []
+    rhs = []
+    e0 = np.zeros((nx, nz))
+    e0[:, :nx] = np.eye(nx)
+    rows.append(e0)
+    rhs.append([1.0, 0.0])
+    for k in range(n):
+        r = np.zeros((nx, nz))
+        r[:, nx * k:nx * k + nx] = A
+        r[:, off + k:off + k + 1] = B
+        r[:, nx * (k + 1):nx * (k + 2)] = -np.eye(nx)
+        rows.append(r)
+        rhs.append([0.0, 0.0])
+    C = np.vstack(rows)
+    d = np.concatenate(rhs)
+    kkt = np.block([[H, C.T], [C, np.zeros((C.shape[0], C.shape[0]))]])
+    sol = np.linalg.solve(kkt, np.concatenate([np.zeros(nz), d]))
+    return sol[:off].reshape(n + 1, nx).T, sol[off:nz].reshape(n, nu).T
+
+
+def test_lq_problem_is_solved_exactly_by_the_first_iteration():
+    prb, x, u = _lq_problem()
+    solver = make_solver("ilqr", prb, {**OPTS, "mu_init": 0.0, "mu_min": 0.0})
+    assert solver.solve()
+    X_ref, U_ref = _riccati_reference()
+    first = solver.stats.history[0]
+    assert first["alpha"] == 1.0
+    # the second iteration only confirms stationarity: nothing moved
+    assert solver.stats.iterations <= 2
+    np.testing.assert_allclose(solver.solution["x"], X_ref, atol=1e-9)
+    np.testing.assert_allclose(solver.solution["u"], U_ref, atol=1e-9)
+
+
+def _solve(prb, name, opts=None):
+    solver = make_solver(name, prb, opts or {})
+    ok = solver.solve()
+    return ok, solver
+
+
+@pytest.mark.parametrize("u_max", [None, 25.0])
+def test_cartpole_swing_up_matches_ipopt(u_max):
+    prb_i, _ = build_cartpole(n_nodes=60, u_max=u_max)
+    ok_i, ipopt = _solve(prb_i, "ipopt")
+    prb_l, _ = build_cartpole(n_nodes=60, u_max=u_max)
+    ok_l, ilqr = _solve(prb_l, "ilqr", OPTS)
+    assert ok_i and ok_l, ilqr.stats.status
+    assert abs(ilqr.stats.cost - ipopt.stats.cost) <= 1e-3 * abs(ipopt.stats.cost)
+    assert ilqr.stats.constraint_violation <= 1e-6
+    if u_max is not None:
+        assert np.max(np.abs(ilqr.solution["u"])) <= u_max + 1e-6
+
+
+@pytest.mark.parametrize("u_max", [
+    6.0,
+    pytest.param(5.5, marks=pytest.mark.xfail(
+        reason="known limitation: with an ACTIVE input bound the augmented-Lagrangian ILQR "
+               "stalls near 1e-1 violation within 400 iterations", strict=False)),
+])
+def test_pendulum_with_input_bounds_and_final_equality_matches_ipopt(u_max):
+    def build():
+        prb = Problem(60)
+        x = prb.create_state_variable("x", 2)
+        u = prb.create_input_variable("u", 1)
+        prb.set_dynamics(cs.vertcat(x[1], -9.81 * cs.sin(x[0]) + u))
+        prb.set_dt(0.05)
+        x.set_bounds([0, 0], [0, 0], nodes=0)
+        u.set_bounds(-u_max, u_max)
+        prb.create_cost("effort", u, weight=0.1)
+        prb.create_final_constraint("upright", x - np.array([np.pi, 0.0]))
+        return prb
+    ok_i, ipopt = _solve(build(), "ipopt")
+    ok_l, ilqr = _solve(build(), "ilqr", OPTS)
+    assert ok_i and ok_l
+    assert abs(ilqr.stats.cost - ipopt.stats.cost) <= 1e-3 * ipopt.stats.cost
+    assert ilqr.stats.constraint_violation <= 1e-6
+    assert np.max(np.abs(ilqr.solution["u"])) <= u_max + 1e-6
+
+
+def test_large_gaps_in_the_warm_start_are_closed():
+    prb, _ = build_cartpole(n_nodes=60)
+    rng = np.random.default_rng(3)
+    q = prb.get_variable("q")
+    q.set_initial_guess(q.initial_guess + rng.normal(0, 0.5, q.initial_guess.shape))
+    solver = make_solver("ilqr", prb, OPTS)
+    X0 = np.vstack([prb.get_variable("q").initial_guess, prb.get_variable("v").initial_guess])
+    F = prb.discrete_dynamics()
+    gaps0 = max(np.max(np.abs(np.asarray(F(X0[:, k], 0.0, [], [])).ravel() - X0[:, k + 1]))
+                for k in range(60))
+    assert gaps0 > 0.3
+    assert solver.solve()
+    X = solver.solution["x"]
+    U = solver.solution["u"]
+    gaps = max(np.max(np.abs(np.asarray(F(X[:, k], U[:, k], [], [])).ravel() - X[:, k + 1]))
+               for k in range(60))
+    assert gaps <= 1e-6
+
+
+def test_free_single_variable_is_refused_not_ignored():
+    prb = Problem(10)
+    prb.create_state_variable("x", 1)
+    u = prb.create_input_variable("u", 1)
+    T = prb.create_single_variable("T", 1)
+    T.set_bounds(0.1, 2.0)
+    prb.set_dynamics(u)
+    prb.set_dt(T / 10)
+    prb.create_cost("u", u)
+    with pytest.raises(ValueError, match="single variable 'T'"):
+        make_solver("ilqr", prb, OPTS)
+
+
+def test_general_cost_is_refused():
+    prb = Problem(10)
+    x = prb.create_state_variable("x", 1)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(u)
+    prb.set_dt(0.1)
+    prb.create_general_cost("quartic", x**4)
+    with pytest.raises(ValueError, match="general cost"):
+        make_solver("ilqr", prb, OPTS)
+
+
+def test_rti_mode_runs_exactly_the_requested_iterations_and_exposes_gains():
+    prb, _ = build_cartpole(n_nodes=40)
+    solver = make_solver("ilqr", prb, {**OPTS, "rti": True, "iterations_per_call": 2})
+    solver.solve()
+    assert solver.stats.iterations == 2
+    assert solver.feedback_gains.shape == (40, 1, 4)
+    assert np.all(np.isfinite(solver.feedback_gains))
+
+
+def test_nan_in_the_problem_is_reported_and_never_returned():
+    prb = Problem(10)
+    x = prb.create_state_variable("x", 1)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.sqrt(x) + u)  # NaN for x < 0
+    prb.set_dt(0.1)
+    x.set_bounds(-1.0, -1.0, nodes=0)
+    prb.create_cost("u", u)
+    solver = make_solver("ilqr", prb, OPTS)
+    ok = solver.solve()
+    assert not ok
+    assert "not finite" in solver.stats.status
+    assert all(np.all(np.isfinite(v)) for v in solver.solution.values())
+
+
+def test_warm_resolve_needs_far_fewer_iterations_than_cold():
+    prb, _ = build_cartpole(n_nodes=60)
+    solver = make_solver("ilqr", prb, OPTS)
+    assert solver.solve()
+    cold = solver.stats.iterations
+    assert solver.solve()  # the solution was written back as the initial guess
+    assert solver.stats.iterations <= max(3, cold // 10)

@@ -1,0 +1,107 @@
+"""Gaits, the stop/start scheduler and the walking problem's consistency."""
+
+import numpy as np
+import pytest
+
+from horizon_mpc.locomotion import make_gait
+from horizon_mpc.locomotion.gaits import swing_height_profile
+from horizon_mpc.mpc.schedule import GaitScheduler
+
+
+def test_trot_moves_diagonal_pairs_together_half_a_period_apart():
+    g = make_gait("trot", step_duration=0.3)
+    s = g.schedule(0.0, 60, 0.01)
+    fl, fr, hl, hr = s.stance
+    np.testing.assert_array_equal(fl, hr)
+    np.testing.assert_array_equal(fr, hl)
+    assert not np.any(fl & fr & ~(np.isclose(s.swing_progress[0], 0)))  # never both front up
+    assert g.period == pytest.approx(0.6)
+    assert np.mean(fl) == pytest.approx(0.5, abs=0.05)
+
+
+def test_walk_lifts_one_foot_at_a_time():
+    s = make_gait("walk", step_duration=0.25).schedule(0.0, 200, 0.005)
+    assert np.max((~s.stance).sum(axis=0)) == 1
+    assert np.all(s.count_swings() >= 1)
+
+
+def test_swing_profile_reaches_the_step_height_with_zero_end_velocity():
+    s = np.linspace(0, 1, 101)
+    z = swing_height_profile(s, 0.08)
+    assert z.max() == pytest.approx(0.08)
+    assert z[0] == 0 and z[-1] == 0
+    assert abs(z[1] - z[0]) < 2e-4 and abs(z[-1] - z[-2]) < 2e-4  # O(h^2): zero slope
+
+
+def test_unknown_gait_names_the_valid_ones():
+    with pytest.raises(ValueError, match="trot"):
+        make_gait("gallop")
+
+
+def test_scheduler_stands_until_commanded_and_finishes_swings_after_stop():
+    sch = GaitScheduler(make_gait("trot", step_duration=0.3))
+    assert sch.schedule(0.0, 20, 0.02).stance.all()
+    sch.command(0.5, moving=True)
+    moving = sch.schedule(0.5, 40, 0.02)
+    assert not moving.stance.all()
+    sch.command(1.0, moving=False)  # stop while two feet swing
+    s = sch.schedule(1.0, 40, 0.02)
+    # feet that were swinging at the stop finish their swing, then everything stays down
+    t = 1.0 + 0.02 * np.arange(41)
+    assert s.stance[:, t > 1.0 + 0.3 + 1e-9].all()
+    sch.command(1.0 + 0.31, moving=False)
+    assert not sch.walking
+
+
+@pytest.mark.slow
+def test_walking_problem_converges_to_a_dynamically_consistent_trot():
+    """A full trot horizon solved by the ILQR: feasible, base wrench zero, feet fixed in stance."""
+    import pinocchio as pin
+
+    from horizon_mpc.mpc import WalkingMpc
+    from horizon_mpc.posture import standing_configuration
+
+    mpc = WalkingMpc("go2")
+    _, q0 = standing_configuration(mpc.cfg)
+    mpc.start(q0, np.zeros(mpc.model.nv), 0.0)
+    mpc.scheduler.command(0.0, True)
+    mpc.cmd[:] = [0.3, 0.0, 0.0]
+    mpc._set_references(0.0)
+    mpc.solver.set_option("rti", False)
+    mpc.solver.set_option("max_iter", 60)
+    assert mpc.solver.solve(), mpc.solver.stats.status
+    assert mpc.solver.stats.constraint_violation < 1e-5
+    plan = mpc._plan(0.0)
+    # the plan's own inverse dynamics: base wrench ~ 0 (under-actuation honoured)
+    assert np.max(np.abs(plan.tau[:6])) < 1e-4
+    # Pinocchio's numeric dynamics reproduce the plan: rnea with the plan's forces
+    pm = mpc.model.pin_model
+    data = pm.createData()
+    for k in range(0, plan.a.shape[1], 7):
+        fext = pin.StdVec_Force()
+        for _ in range(pm.njoints):
+            fext.append(pin.Force.Zero())
+        pin.framesForwardKinematics(pm, data, plan.q[:, k])
+        for i, foot in enumerate(mpc.wp.feet):
+            fid = pm.getFrameId(foot)
+            jid = pm.frames[fid].parentJoint
+            f_world = plan.f[3 * i:3 * i + 3, k]
+            oMf = data.oMf[fid]
+            oMj = data.oMi[jid]
+            # point force at the foot, in the joint frame
+            f_local = oMj.rotation.T @ f_world
+            p_local = oMj.rotation.T @ (oMf.translation - oMj.translation)
+            fext[jid] += pin.Force(f_local, np.cross(p_local, f_local))
+        tau = pin.rnea(pm, data, plan.q[:, k], plan.v[:, k], plan.a[:, k], fext)
+        np.testing.assert_allclose(tau, plan.tau[:, k], atol=1e-6)
+    # swing feet carry no force; stance feet stay inside the friction cone
+    mu = mpc.cfg.friction
+    for i in range(len(mpc.wp.feet)):
+        f = plan.f[3 * i:3 * i + 3]
+        swing = ~plan.stance[i, :-1]
+        assert np.max(np.abs(f[:, swing]), initial=0) < 1e-5
+        st = plan.stance[i, :-1]
+        assert np.all(f[2, st] >= -1e-5)
+        assert np.all(np.abs(f[0, st]) <= mu * f[2, st] + 1e-5)
+    # the plan moves forward
+    assert plan.q[0, -1] > 0.05
