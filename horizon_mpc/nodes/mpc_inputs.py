@@ -135,10 +135,13 @@ def base_from_odometry(
                       ("angular twist", v_ang)):
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"Odometry {what} is not finite: {arr.tolist()}")
-    norm = float(np.linalg.norm(quat))
-    if norm < 1e-6:
+    scale = float(np.max(np.abs(quat)))  # normalise in two steps: |q|^2 may overflow
+    if scale < 1e-6:
         raise ValueError(f"Odometry orientation is a zero quaternion {quat.tolist()}")
+    unit = quat / scale
+    unit /= np.linalg.norm(unit)
+    norm = scale * float(np.linalg.norm(quat / scale))
     notes = []
     if abs(norm - 1.0) > QUATERNION_TOLERANCE:
         notes.append(f"Odometry orientation has norm {norm:.6g}; normalised")
-    return pos, quat / norm, v_lin, v_ang, notes
+    return pos, unit, v_lin, v_ang, notes

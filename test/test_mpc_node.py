@@ -1,0 +1,313 @@
+"""The MPC node: input validation (no DDS) and the node in-process with a scripted state.
+
+The node tests share one built :class:`WalkingMpc` (building takes seconds) and use a private
+rclpy Context each. Without ``use_sim_time`` the node clock is the wall clock, so the scripted
+states are stamped with it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+import rclpy
+from geometry_msgs.msg import Twist
+from hypothesis import given
+from hypothesis import strategies as st
+from nav_msgs.msg import Odometry, Path
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+from horizon_mpc.mpc.controller import WalkingMpc
+from horizon_mpc.nodes.conversions import (
+    joint_state_to_msg,
+    odometry_to_msg,
+    seconds_from_duration,
+    time_from_ns,
+    time_to_ns,
+)
+from horizon_mpc.nodes.mpc_inputs import (
+    ABSURD_COMMAND,
+    base_from_odometry,
+    command_from_twist,
+    joints_from_joint_state,
+)
+from horizon_mpc.nodes.mpc_node import MpcNode
+from horizon_mpc.posture import standing_configuration
+
+assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"  # set by conftest.py
+
+JOINTS = ["a", "b", "c"]
+LIMITS = (1.0, 0.5, 1.0)
+floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
+
+
+def twist(vx: float = 0.0, vy: float = 0.0, wz: float = 0.0) -> Twist:
+    msg = Twist()
+    msg.linear.x, msg.linear.y, msg.angular.z = float(vx), float(vy), float(wz)
+    return msg
+
+
+# ---------------------------------------------------------------------- validation, no DDS
+@given(vx=floats, vy=floats, wz=floats)
+def test_cmd_vel_is_finite_and_within_limits_or_rejected(vx, vy, wz):
+    try:
+        cmd, _ = command_from_twist(twist(vx, vy, wz), LIMITS)
+    except ValueError as exc:
+        assert "cmd_vel" in str(exc)
+        assert not all(math.isfinite(x) and abs(x) <= ABSURD_COMMAND for x in (vx, vy, wz))
+        return
+    assert np.all(np.isfinite(cmd)) and np.all(np.abs(cmd) <= LIMITS)
+
+
+def test_cmd_vel_beyond_the_limits_is_clamped_with_a_note():
+    cmd, notes = command_from_twist(twist(3.0, -2.0, 0.1), LIMITS)
+    np.testing.assert_array_equal(cmd, [1.0, -0.5, 0.1])
+    assert "clamped" in notes[0]
+
+
+@given(
+    order=st.permutations(JOINTS + ["extra"]),
+    drop=st.sampled_from([None, *JOINTS]),
+    pos=st.lists(floats, min_size=3, max_size=5),
+    vel=st.lists(floats, min_size=0, max_size=5),
+)
+def test_joint_state_is_matched_by_name_or_rejected(order, drop, pos, vel):
+    names = [n for n in order if n != drop]
+    msg = JointState(name=names, position=pos, velocity=vel)
+    try:
+        qj, vj, _ = joints_from_joint_state(msg, JOINTS)
+    except ValueError as exc:
+        assert "JointState" in str(exc)
+        return
+    assert drop is None and len(pos) == len(names)
+    for i, n in enumerate(JOINTS):
+        assert qj[i] == pos[names.index(n)]
+    assert np.all(np.isfinite(qj)) and np.all(np.isfinite(vj)) and vj.shape == (3,)
+
+
+def test_joint_state_repairs_are_named():
+    msg = JointState(name=["c", "a", "b", "x"], position=[3.0, 1.0, 2.0, 9.0],
+                     velocity=[math.nan, 0.1, 0.2, 0.0])
+    qj, vj, notes = joints_from_joint_state(msg, JOINTS)
+    np.testing.assert_array_equal(qj, [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(vj, [0.1, 0.2, 0.0])
+    assert any("['x']" in n for n in notes) and any("non-finite velocities for ['c']" in n
+                                                    for n in notes)
+
+
+def test_joint_state_with_a_missing_joint_names_it():
+    with pytest.raises(ValueError, match=r"lacks joints \['b'\]"):
+        joints_from_joint_state(JointState(name=["a", "c"], position=[0.0, 0.0]), JOINTS)
+
+
+@given(pose=st.lists(floats, min_size=7, max_size=7), twist6=st.lists(floats, min_size=6,
+                                                                        max_size=6))
+def test_odometry_gives_a_unit_quaternion_or_is_rejected(pose, twist6):
+    msg = Odometry()
+    p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    p.x, p.y, p.z, o.x, o.y, o.z, o.w = pose
+    t = msg.twist.twist
+    t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z = twist6
+    try:
+        pos, quat, lin, ang, _ = base_from_odometry(msg)
+    except ValueError as exc:
+        assert "Odometry" in str(exc)
+        return
+    assert all(np.all(np.isfinite(x)) for x in (pos, quat, lin, ang))
+    assert abs(np.linalg.norm(quat) - 1.0) < 1e-9
+
+
+def test_odometry_non_unit_quaternion_is_normalised_with_a_note_and_zero_rejected():
+    msg = odometry_to_msg(time_from_ns(0), [0, 0, 0.3], [0, 0, 0, 2.0], [0, 0, 0], [0, 0, 0])
+    _, quat, _, _, notes = base_from_odometry(msg)
+    np.testing.assert_allclose(quat, [0, 0, 0, 1])
+    assert "norm 2" in notes[0]
+    msg.pose.pose.orientation.w = 0.0
+    with pytest.raises(ValueError, match="zero quaternion"):
+        base_from_odometry(msg)
+
+
+# ---------------------------------------------------------------------- the node in-process
+@pytest.fixture(scope="module")
+def walking_mpc():
+    return WalkingMpc("go2", iterations=1)
+
+
+@pytest.fixture
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+class Harness:
+    """An MpcNode plus a probe node that plays the robot (states) and the operator (cmd_vel)."""
+
+    def __init__(self, context: rclpy.Context, mpc: WalkingMpc, **params: object) -> None:
+        mpc.t_last = None  # a fresh bootstrap for every test
+        overrides = [Parameter(k, value=v) for k, v in {"trigger": "state", **params}.items()]
+        self.node = MpcNode(parameter_overrides=overrides, mpc=mpc, context=context)
+        self.probe = Node("probe", context=context)
+        self.trajectories: list[JointTrajectory] = []
+        self.paths: list[Path] = []
+        self.probe.create_subscription(JointTrajectory, "joint_trajectory",
+                                       self.trajectories.append, 10)
+        self.probe.create_subscription(Path, "/mpc/predicted_base_path", self.paths.append, 10)
+        self.pub_js = self.probe.create_publisher(JointState, "joint_states", 10)
+        self.pub_odom = self.probe.create_publisher(Odometry, "odom", 10)
+        self.pub_cmd = self.probe.create_publisher(Twist, "cmd_vel", 10)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.probe)
+        _, self.q = standing_configuration(mpc.cfg)
+        self.spin_until(lambda: self.pub_js.get_subscription_count() > 0
+                        and self.pub_odom.get_subscription_count() > 0
+                        and self.pub_cmd.get_subscription_count() > 0
+                        and self.node._pub_traj.get_subscription_count() > 0)
+
+    def spin_until(self, done: Callable[[], bool], timeout: float = 20.0) -> None:
+        end = time.monotonic() + timeout
+        while not done():
+            assert time.monotonic() < end, "timed out waiting in the executor"
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def publish_state(self, age: float = 0.0) -> int:
+        """The standing state, stamped ``age`` s before now; returns the stamp (ns)."""
+        stamp_ns = self.probe.get_clock().now().nanoseconds - round(age * 1e9)
+        stamp = time_from_ns(stamp_ns)
+        q = self.q
+        self.pub_js.publish(joint_state_to_msg(stamp, self.node.joint_names, q[7:],
+                                               np.zeros(len(q) - 7)))
+        self.pub_odom.publish(odometry_to_msg(stamp, q[:3], q[3:7], np.zeros(3), np.zeros(3)))
+        return stamp_ns
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.probe.destroy_node()
+
+
+@pytest.fixture
+def harness(context, walking_mpc):
+    made: list[Harness] = []
+
+    def make(**params: object) -> Harness:
+        made.append(Harness(context, walking_mpc, **params))
+        return made[-1]
+
+    yield make
+    for h in made:
+        h.close()
+
+
+def test_a_state_is_answered_by_a_well_formed_trajectory(harness):
+    h = harness()
+    stamp_ns = h.publish_state()
+    h.spin_until(lambda: h.trajectories and h.paths)
+    msg, plan = h.trajectories[-1], h.node.plan
+    assert time_to_ns(msg.header.stamp) == stamp_ns  # the stamp of the state planned from
+    assert list(msg.joint_names) == h.node.mpc.model.joint_names  # model order
+    assert len(msg.points) == 6  # publish_points default
+    for k, pt in enumerate(msg.points):
+        assert seconds_from_duration(pt.time_from_start) == pytest.approx(k * plan.dt)
+        np.testing.assert_array_equal(pt.positions, plan.q[7:, k])
+        np.testing.assert_array_equal(pt.velocities, plan.v[6:, k])
+        np.testing.assert_array_equal(pt.accelerations, plan.a[6:, k])
+        np.testing.assert_array_equal(pt.effort, plan.tau[6:, k])
+    assert len(h.paths[-1].poses) == plan.q.shape[1]
+    assert h.paths[-1].header.frame_id == "odom"
+
+
+def test_efforts_are_the_inverse_dynamics_of_the_plan(harness):
+    h = harness()
+    h.publish_state()
+    h.spin_until(lambda: h.trajectories)
+    plan, mpc = h.node.plan, h.node.mpc
+    rnea = mpc.model.inverse_dynamics(mpc.wp.feet)
+    for k, pt in enumerate(h.trajectories[-1].points):
+        tau = np.asarray(rnea(plan.q[:, k], plan.v[:, k], plan.a[:, k], plan.f[:, k])).ravel()
+        np.testing.assert_allclose(pt.effort, tau[6:], atol=1e-8)
+    # standing: the joints carry the robot's weight (not zero torques)
+    assert np.max(np.abs(h.trajectories[-1].points[0].effort)) > 1.0
+
+
+def test_a_stale_state_is_not_planned_from(harness):
+    h = harness(state_timeout=0.2)
+    h.publish_state(age=1.0)
+    h.spin_until(lambda: h.node.stale_skips > 0)
+    h.spin_for(0.2)
+    assert h.trajectories == [] and h.node.plan is None
+
+
+def test_no_state_means_no_trajectory(harness):
+    h = harness(trigger="timer", control_rate=50.0)
+    h.spin_for(0.3)
+    assert h.trajectories == [] and h.node.ticks == 0
+
+
+def test_a_stale_command_becomes_zero(harness):
+    h = harness(cmd_timeout=0.2)
+    h.pub_cmd.publish(twist(0.3, 0.0, 0.2))
+    h.spin_until(lambda: h.node._cmd is not None)
+    np.testing.assert_array_equal(h.node.command, [0.3, 0.0, 0.2])
+    time.sleep(0.3)
+    np.testing.assert_array_equal(h.node.command, [0.0, 0.0, 0.0])
+
+
+def test_bad_inputs_are_counted_and_do_not_kill_the_node(harness):
+    h = harness()
+    h.pub_cmd.publish(twist(math.nan, 0.0, 0.0))
+    h.pub_js.publish(JointState(name=["nope"], position=[0.0]))
+    bad = Odometry()  # zero quaternion
+    bad.pose.pose.orientation.w = 0.0
+    h.pub_odom.publish(bad)
+    h.spin_until(lambda: all(h.node.rejected.values()))
+    h.publish_state()
+    h.spin_until(lambda: h.trajectories)
+
+
+def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):
+    h = harness()
+    res = h.node.set_parameters([Parameter("gait", value="walk"),
+                                 Parameter("w_posture", value=2.0),
+                                 Parameter("max_vx", value=0.4)])
+    assert all(r.successful for r in res)
+    st_ = h.node.mpc.settings
+    assert st_.gait.name == h.node.mpc.scheduler.gait.name == "walk"
+    assert st_.weights.posture == 2.0 and st_.max_velocity[0] == 0.4
+    assert not h.node.set_parameters([Parameter("gait", value="moonwalk")])[0].successful
+    assert not h.node.set_parameters([Parameter("robot", value="solo12")])[0].successful
+    h.node.set_parameters([Parameter("gait", value="trot"), Parameter("w_posture", value=1.0),
+                           Parameter("max_vx", value=1.0)])
+
+
+def test_sigterm_exits_cleanly_with_code_0():
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    proc = subprocess.Popen([sys.executable, "-m", "horizon_mpc.nodes.mpc_node"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        for line in proc.stdout:
+            if "waiting for joint_states" in line:
+                break
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
