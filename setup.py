@@ -29,7 +29,6 @@ EXECUTABLES = {
     "mpc_node": "horizon_mpc.nodes.mpc_node:main",
     "sim_node": "horizon_mpc.nodes.sim_node:main",
     "closed_loop": "horizon_mpc.closed_loop:main",
-    "motion": "horizon_mpc.motions.cli:main",
 }
 
 INSTALL_REQUIRES = [
