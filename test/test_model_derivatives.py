@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -67,3 +68,21 @@ def test_contact_force_jacobian_is_minus_the_contact_jacobian_transposed():
     for i in range(5):
         jacs = [m.jacobian(c, "LOCAL_WORLD_ALIGNED")(s["q"][:, i]).full()[:3] for c in contacts]
         assert rel_err(df[:, :, i], -np.vstack(jacs).T) < 1e-12
+
+
+@pytest.mark.parametrize("name", ["solo12", "anymal_c", "panda", "ur5"])
+def test_analytical_derivatives_match_casadi_ad(name):
+    # Other joint types (unaligned revolute, prismatic) and fixed bases, against plain AD.
+    m = model(name)
+    contacts = [m.frame_names[-1], m.frame_names[len(m.frame_names) // 2]]
+    q, v, a = (ca.SX.sym(x, n) for x, n in (("q", m.nq), ("v", m.nv), ("a", m.nv)))
+    f = ca.SX.sym("f", 6)
+    tau = m.inverse_dynamics(contacts)(q, v, a, f)
+    jq = ca.jacobian(tau, q) @ m.tangent_map()(q)
+    ad = ca.Function("ad", [q, v, a, f], [tau, jq] + [ca.jacobian(tau, x) for x in (v, a, f)])
+    s = random_states(m, n=20)
+    forces = 50.0 * np.random.default_rng(5).normal(size=(6, 20))
+    args = (s["q"], s["v"], s["a"], forces)
+    got = evaluate(m.inverse_dynamics_derivatives(contacts), *args)
+    for value, expected in zip(got, evaluate(ad, *args), strict=True):
+        assert rel_err(value, expected) < 1e-9

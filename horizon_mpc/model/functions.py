@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import casadi as ca
 
-from horizon_mpc.model import dynamics, kinematics, liegroup
+from horizon_mpc.model import derivatives, dynamics, kinematics, liegroup
 
 __all__ = ["SymbolicFunctions"]
 
@@ -113,27 +113,30 @@ class SymbolicFunctions:
 
         ``dtau_dq`` (nv x nv) is taken on the tangent space:
         ``d/d dq ID(integrate(q, dq), v, a, f)`` at ``dq = 0`` (as Pinocchio's
-        ``computeRNEADerivatives``). ``dtau_df`` is (nv x 3 nc).
+        ``computeRNEADerivatives``). ``dtau_da`` is the mass matrix, ``dtau_df`` (nv x 3 nc)
+        is ``-J_c^T``. Built analytically (see :mod:`horizon_mpc.model.derivatives`), about
+        two thirds of the operations of CasADi's AD through the recursion.
         """
         names = self._contacts(contacts)
 
         def build() -> ca.Function:
-            fn = self.inverse_dynamics(names)
             f = ca.SX.sym("f", 3 * len(names))
-            tau = fn(self._q, self._v, self._a, f)
-            tmap = liegroup.tangent_map(self._specs, self._q, self.nq, self.nv)
-            jq = ca.jacobian(tau, self._q) @ tmap
-            outs = [
-                tau,
-                jq,
-                ca.jacobian(tau, self._v),
-                ca.jacobian(tau, self._a),
-                ca.jacobian(tau, f),
-            ]
+            frames = [self._frame(c) for c in names]
+            outs = derivatives.inverse_dynamics_derivatives(
+                self._specs,
+                self._kinematics("none"),
+                self._v,
+                self._a,
+                self._gravity,
+                self.nv,
+                frames,
+                f,
+            )
+            # Common-subexpression elimination: ~10% fewer operations in the compiled code.
             return ca.Function(
                 "inverse_dynamics_derivatives",
                 [self._q, self._v, self._a, f],
-                outs,
+                ca.cse(list(outs)),
                 ["q", "v", "a", "f"],
                 ["tau", "dtau_dq", "dtau_dv", "dtau_da", "dtau_df"],
             )
