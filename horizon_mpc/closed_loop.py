@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ from geometry_msgs.msg import Twist
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.utilities import remove_ros_args
 
 from horizon_mpc.nodes.mpc_node import MpcNode
 from horizon_mpc.nodes.sim_node import SimNode
@@ -203,7 +205,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--iterations", type=int, default=2, help="ILQR iterations per tick")
     ap.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
                     help="render a GIF (every 50 ms of sim time)")
-    args = ap.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = ap.parse_args(remove_ros_args(["closed_loop", *argv])[1:])  # tolerate --ros-args
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     segments = load_profile(args.profile)
     print(f"closed loop: {args.robot}, {args.mode}, profile {args.profile}")
