@@ -28,7 +28,6 @@ from horizon_mpc.problem.nodes import NodeSelection
 from horizon_mpc.problem.terms import Constraint, Cost, GeneralCost, Term
 from horizon_mpc.problem.variables import (
     InputVariable,
-    OffsetVariable,
     Parameter,
     SingleVariable,
     StateVariable,
