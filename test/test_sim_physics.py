@@ -136,6 +136,7 @@ def test_standing_feedforward_balances_gravity(go2):
 
 
 # ---------------------------------------------------------------- behaviour
+@pytest.mark.slow  # 10 s of sim time per robot (~1-1.5 s wall each on an idle machine)
 @pytest.mark.parametrize("robot", ["go2", "solo12", "anymal_c"])
 def test_standing_hold_keeps_height_for_10s(robot):
     """PD hold + gravity-compensating feed-forward: base height within 2 cm for 10 s."""
