@@ -97,6 +97,13 @@ class SimNode(Node):
         self.push_duration = par("push_duration")
         self._steps_per_state = max(1, round(physics_rate / par("state_rate")))
         self._steps_per_control = max(1, round(par("control_period") * physics_rate))
+        for name, steps, period in (("state_rate", self._steps_per_state, 1 / par("state_rate")),
+                                    ("control_period", self._steps_per_control,
+                                     par("control_period"))):
+            if abs(steps * self.sim.dt - period) > 1e-9:
+                self.get_logger().warning(
+                    f"{name}: {period:g} s is not a whole number of physics steps; "
+                    f"using {steps} steps = {steps * self.sim.dt:g} s")
 
         self.rejected_trajectories = 0
         self.rejected_wrenches = 0
