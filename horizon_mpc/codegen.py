@@ -27,9 +27,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
+import numpy as np
 
 __all__ = [
     "STATS",
+    "BufferedFunction",
     "CompileStats",
     "codegen_enabled",
     "compile_function",
@@ -40,9 +42,10 @@ __all__ = [
 _log = logging.getLogger(__name__)
 
 CC = os.environ.get("CC", "gcc")
-# Optimisation level by size of the generated C: gcc's time grows superlinearly with -O3 on
-# multi-megabyte straight-line code, while -O1 keeps most of the runtime speed there.
-_OPT_BY_SIZE = ((1_000_000, "-O3"), (4_000_000, "-O2"))
+# Optimisation level by size of the generated C. SX code is long straight-line arithmetic:
+# measured on go2's inverse-dynamics derivatives mapped over 50 nodes (423 kB of C), -O1
+# compiles in 10 s against 24 s for -O3 and runs within 5% of it (doc/benchmarks.md).
+_OPT_BY_SIZE = ((150_000, "-O3"),)
 _OPT_LARGE = "-O1"
 _FLAGS = ("-shared", "-fPIC")
 _POLICY = f"{_OPT_BY_SIZE}|{_OPT_LARGE}|{_FLAGS}|v1"
@@ -166,3 +169,49 @@ def _build(fn: ca.Function, lib: Path) -> None:
         _log.info("compiled %s in %.1f s -> %s", fn.name(), time.perf_counter() - start, lib)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+class BufferedFunction:
+    """Evaluate a Function on preallocated numpy arrays, with no DM conversion.
+
+    Passing numpy arrays to a ``casadi.Function`` converts them to DM element by element
+    (about 50 ns per number in CasADi 3.8) and every output is a freshly allocated DM: for a
+    Jacobian mapped over 50 nodes that is as much time as the evaluation. This wrapper binds
+    fixed input and output arrays once (``Function.buffer()``) and writes into them in place.
+
+    Example::
+
+        call = BufferedFunction(compile_function(fn.map(50)))
+        tau, dtau_dq, *_ = call(q, v, a, f)  # numpy views, overwritten by the next call
+
+    Only dense inputs and outputs are supported (densify the Function otherwise).
+    """
+
+    def __init__(self, fn: ca.Function) -> None:
+        for kind, n, sp in (
+            ("input", fn.n_in(), fn.sparsity_in),
+            ("output", fn.n_out(), fn.sparsity_out),
+        ):
+            for i in range(n):
+                if not sp(i).is_dense():
+                    raise ValueError(f"{fn.name()}: {kind} {i} is sparse; use a dense Function")
+        self.fn = fn
+        self._buffer, self._eval = fn.buffer()
+        # CasADi is column-major: a Fortran-ordered array's transpose is a C-contiguous view
+        self.inputs = [np.zeros(fn.size_in(i), order="F") for i in range(fn.n_in())]
+        self.outputs = [np.zeros(fn.size_out(i), order="F") for i in range(fn.n_out())]
+        for i, arr in enumerate(self.inputs):
+            self._buffer.set_arg(i, memoryview(arr.T))
+        for i, arr in enumerate(self.outputs):
+            self._buffer.set_res(i, memoryview(arr.T))
+
+    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+        """Copy ``args`` into the input buffers, evaluate, return the output arrays."""
+        if len(args) != len(self.inputs):
+            raise TypeError(f"{self.fn.name()} takes {len(self.inputs)} inputs, got {len(args)}")
+        for dst, src in zip(self.inputs, args, strict=True):
+            dst[...] = np.reshape(src, dst.shape, order="F")
+        self._eval()
+        if self._buffer.ret() != 0:
+            raise RuntimeError(f"evaluating {self.fn.name()} failed")
+        return self.outputs

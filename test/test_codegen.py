@@ -136,3 +136,23 @@ def test_second_process_loads_from_the_warm_cache(cache):
     ]
     assert "compiling fk_FL_FOOT" in runs[0] and "compiled 1 loaded 0" in runs[0]
     assert "compiling" not in runs[1] and "compiled 0 loaded 1" in runs[1]
+
+
+def test_buffered_function_matches_a_plain_call(cache):
+    fn = codegen.compile_function(_small_function().map(4, "serial"))
+    call = codegen.BufferedFunction(fn)
+    x = np.arange(12.0).reshape(3, 4)
+    p = np.array([[1.0, 2.0, 3.0, 4.0]])
+    y, n = call(x, p)
+    y_ref, n_ref = fn(x, p)
+    assert np.array_equal(y, y_ref.full()) and np.array_equal(n, n_ref.full())
+    x2 = x + 1.0
+    y2, _ = call(x2, p)  # the same arrays, overwritten in place
+    assert y2 is y and np.array_equal(y, fn(x2, p)[0].full())
+
+
+def test_buffered_function_rejects_sparse_outputs():
+    x = ca.SX.sym("x", 2)
+    fn = ca.Function("diag", [x], [ca.diag(x)])
+    with pytest.raises(ValueError, match="sparse"):
+        codegen.BufferedFunction(fn)
