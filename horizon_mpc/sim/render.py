@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -10,7 +12,24 @@ import pybullet as p
 
 from horizon_mpc.sim.rotations import quat_yaw
 
-__all__ = ["render_following", "write_gif"]
+__all__ = ["checker_texture", "render_following", "write_gif"]
+
+
+@functools.cache
+def checker_texture(squares: int = 200, pixels: int = 4) -> Path:
+    """A grey checkerboard PNG (``squares`` x ``squares``), written once per process.
+
+    Stretched over the ground's visual (100 m wide) it gives 0.5 m squares, so that motion
+    is visible in rendered frames.
+    """
+    from PIL import Image
+
+    board = (np.indices((squares, squares)).sum(axis=0) % 2).astype(np.uint8) * 40 + 150
+    board = np.kron(board, np.ones((pixels, pixels), dtype=np.uint8))
+    rgb = np.stack([board, board + 10, board], axis=-1)
+    path = Path(tempfile.mkdtemp(prefix="horizon_mpc_sim_")) / "checker.png"
+    Image.fromarray(rgb).save(path)
+    return path
 
 
 def render_following(

@@ -27,7 +27,7 @@ import pybullet as p
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.posture import standing_configuration
 from horizon_mpc.sim.loading import LoadedRobot, load_robot
-from horizon_mpc.sim.render import render_following
+from horizon_mpc.sim.render import checker_texture, render_following
 from horizon_mpc.sim.rotations import (
     quat_from_yaw,
     quat_multiply,
@@ -194,6 +194,9 @@ class Simulator:
                                   visualFramePosition=[0.0, 0.0, -0.005],
                                   rgbaColor=[0.55, 0.6, 0.55, 1.0], physicsClientId=self.client)
         ground = p.createMultiBody(0.0, col, vis, physicsClientId=self.client)
+        texture = p.loadTexture(str(checker_texture()), physicsClientId=self.client)
+        p.changeVisualShape(ground, -1, textureUniqueId=texture, rgbaColor=[1, 1, 1, 1],
+                            physicsClientId=self.client)
         # pybullet multiplies the two bodies' coefficients: the robot's links carry `friction`.
         p.changeDynamics(ground, -1, lateralFriction=1.0, restitution=0.0,
                          physicsClientId=self.client)
