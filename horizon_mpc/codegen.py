@@ -3,7 +3,8 @@
 ``compile_function(fn)`` generates C for ``fn`` (``casadi.CodeGenerator``), builds a shared
 library with ``gcc -shared -fPIC`` and loads it with ``casadi.external``. The result has the
 same name, inputs and outputs as ``fn`` and returns the same numbers. It evaluates numerically
-and on MX, not on SX (an external function has no SX graph).
+and on MX, not on SX (an external function has no SX graph), and it has no derivatives:
+compile the derivative Function you need (e.g. a Jacobian) rather than differentiating it.
 
 Cache: ``$HORIZON_MPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/horizon_mpc``, else
 ``~/.cache/horizon_mpc``. A library is keyed by a hash of ``fn.serialize()``, the compiler
@@ -19,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -37,6 +39,7 @@ __all__ = [
     "compile_function",
     "default_cache_dir",
     "forget_loaded",
+    "function_name",
 ]
 
 _log = logging.getLogger(__name__)
@@ -77,6 +80,12 @@ def default_cache_dir() -> Path:
     xdg = os.environ.get("XDG_CACHE_HOME")
     base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
     return base / "horizon_mpc"
+
+
+def function_name(text: str) -> str:
+    """``text`` made a valid CasADi Function (and C) name: ``[A-Za-z](_?[A-Za-z0-9])*``."""
+    out = re.sub(r"_+", "_", re.sub(r"\W", "_", text)).strip("_")
+    return out if out[:1].isalpha() else "f_" + out
 
 
 def _opt_flag(c_size: int) -> str:
@@ -123,7 +132,7 @@ def compile_function(
     """
     if not codegen_enabled():
         return fn
-    fn = _renamed(fn, name or fn.name())
+    fn = _renamed(fn, function_name(name or fn.name()))  # the name is a C symbol
     folder = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
     lib = folder / f"{fn.name()}_{_key(fn)}.so"
     if str(lib) in _LOADED:

@@ -156,3 +156,10 @@ def test_buffered_function_rejects_sparse_outputs():
     fn = ca.Function("diag", [x], [ca.diag(x)])
     with pytest.raises(ValueError, match="sparse"):
         codegen.BufferedFunction(fn)
+
+
+def test_names_that_are_not_c_identifiers_are_sanitised(cache):
+    x = ca.SX.sym("x")
+    fast = codegen.compile_function(ca.Function("f", [x], [2 * x]), name="fk_FL-foot.0")
+    assert fast.name() == "fk_FL_foot_0"
+    assert float(fast(1.5)) == 3.0

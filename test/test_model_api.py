@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 import pytest
-from model_reference import centauro_wheels_urdf, model
+from model_reference import ROBOTS, centauro_wheels_urdf, model
 
 from horizon_mpc.model import RobotModel, UnknownNameError
 from horizon_mpc.robots import example_robot_files
@@ -161,3 +161,11 @@ def test_unsupported_joint_type_is_rejected():
     )
     with pytest.raises(NotImplementedError, match="not supported"):
         RobotModel.from_urdf(urdf, floating_base=False)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_every_frame_gets_a_validly_named_function(name):
+    # Function names are C symbols: frame names with dots, dashes or "__" must still work.
+    m = model(name)
+    for frame in m.frame_names:
+        assert m.fk(frame).name().startswith("fk_")

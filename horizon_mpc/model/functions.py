@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 import casadi as ca
 
+from horizon_mpc.codegen import function_name
 from horizon_mpc.model import derivatives, dynamics, kinematics, liegroup
 
 __all__ = ["SymbolicFunctions"]
@@ -18,8 +19,7 @@ DEFAULT_REF = "LOCAL_WORLD_ALIGNED"
 
 
 def _c(text: str) -> str:
-    out = "".join(ch if ch.isalnum() else "_" for ch in text)
-    return out if out[:1].isalpha() else "f_" + out
+    return function_name(text)
 
 
 class SymbolicFunctions:
