@@ -40,6 +40,20 @@ def test_compiled_forward_kinematics_returns_what_the_vm_does(cache):
         assert np.allclose(c_out, vm_out, rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.slow
+def test_compiled_inverse_dynamics_and_derivatives_return_what_the_vm_does(cache):
+    m = model("solo12")
+    feet = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+    s = random_states(m, n=10)
+    f = 30.0 * np.random.default_rng(7).normal(size=(12, 10))
+    for fn in (m.inverse_dynamics(feet), m.inverse_dynamics_derivatives(feet)):
+        mapped = fn.map(10, "serial")
+        fast = codegen.compile_function(mapped)
+        args = [s["q"], s["v"], s["a"], f]
+        for vm_out, c_out in zip(mapped.call(args), fast.call(args), strict=True):
+            assert np.allclose(c_out.full(), vm_out.full(), rtol=1e-12, atol=1e-12)
+
+
 def test_compiled_function_keeps_name_and_signature(cache):
     fn = _small_function()
     fast = codegen.compile_function(fn)

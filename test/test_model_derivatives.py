@@ -86,3 +86,21 @@ def test_analytical_derivatives_match_casadi_ad(name):
     got = evaluate(m.inverse_dynamics_derivatives(contacts), *args)
     for value, expected in zip(got, evaluate(ad, *args), strict=True):
         assert rel_err(value, expected) < 1e-9
+
+
+def test_casadi_ad_of_inverse_dynamics_through_integrate_matches_pinocchio():
+    # What a solver does with the plain ID Function: d/d(dq) ID(integrate(q, dq), ...) at 0.
+    m = model("go2")
+    contacts = FEET["go2"]
+    q, dq = ca.SX.sym("q", m.nq), ca.SX.sym("dq", m.nv)
+    v, a, f = ca.SX.sym("v", m.nv), ca.SX.sym("a", m.nv), ca.SX.sym("f", 12)
+    tau = m.inverse_dynamics(contacts)(m.integrate()(q, dq), v, a, f)
+    jacs = [ca.jacobian(tau, x) for x in (dq, v, a)]
+    ad = ca.Function("ad", [q, dq, v, a, f], jacs)
+    s = random_states(m, n=10)
+    forces = 50.0 * np.random.default_rng(6).normal(size=(12, 10))
+    for i in range(10):
+        cols = (s["q"][:, i], s["v"][:, i], s["a"][:, i], forces[:, i])
+        got = ad(cols[0], np.zeros(m.nv), *cols[1:])
+        for value, expected in zip(got, _pin_derivatives(m, contacts, *cols), strict=True):
+            assert rel_err(value.full(), expected) < TOL
