@@ -9,7 +9,11 @@ from horizon_mpc.examples.double_integrator import (
     build_double_integrator,
     double_integrator_optimum,
 )
-from horizon_mpc.examples.pendulum import build_pendulum_min_time, pendulum_dynamics
+from horizon_mpc.examples.pendulum import (
+    build_pendulum_min_time,
+    energy_pumping_guess,
+    pendulum_dynamics,
+)
 
 __all__ = [
     "build_cartpole",
@@ -17,5 +21,6 @@ __all__ = [
     "build_pendulum_min_time",
     "cartpole_dynamics",
     "double_integrator_optimum",
+    "energy_pumping_guess",
     "pendulum_dynamics",
 ]

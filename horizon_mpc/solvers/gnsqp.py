@@ -6,29 +6,42 @@ solves the QP
     min_d  1/2 d' (2 J_R' J_R + reg I) d + (2 J_R' R)' d
     s.t.   lbg - g(w) <= J_g(w) d <= ubg - g(w),     lbx - w <= d <= ubx - w
 
-through CasADi's ``conic`` interface (sparsity fixed, QP solver built once), then takes a
-step ``w += alpha d`` chosen by backtracking (Armijo) on the l1 merit function
-``phi(w) = f(w) + mu ||viol(g(w))||_1``, whose penalty ``mu`` never decreases and stays above
+through CasADi's ``conic`` interface (sparsity fixed, QP solver built once; variables and
+constraints sorted stage-wise so the KKT matrix is banded). When the linearised constraints
+are inconsistent, an *elastic* QP (l1-penalised slacks on every row, penalty
+``elastic_penalty``) gives the step instead. The step ``w += alpha d`` is chosen by
+backtracking (Armijo, non-monotone over the last ``nonmonotone`` merit values, which lets
+the full Gauss-Newton step through where a monotone test would halve it forever) on the
+l1 merit ``phi(w) = f(w) + mu ||viol(g(w))||_1``; ``mu`` never decreases and stays above
 the largest QP multiplier. Multipliers follow ``lam += alpha (lam_QP - lam)``.
 
 Convergence: the constraint violation (dynamics, constraints, bounds; inf-norm) is below
-``tol_constr`` and either the KKT stationarity ``||grad f + J_g' lam_g + lam_x||_inf`` is
-below ``tol`` or the last step ``||alpha d||_inf`` is below ``tol_step``.
+``tol_constr`` and either the KKT stationarity ``||grad f + J_g' lam_g + lam_x||_inf``
+(divided by IPOPT's multiplier scale ``max(1, mean |lam| / 100)``) is below ``tol`` or the
+last step ``||alpha d||_inf`` is below ``tol_step``.
+
+Gauss-Newton ignores the curvature of the constraints (``lam' d2g``): convergence is
+linear, fast when residuals dominate (tracking MPC), slower when the multipliers are large
+(swing-ups). It also needs a sensible initial guess: from a poor one the linearisations
+can turn inconsistent; IPOPT is the robust choice for cold, highly nonlinear problems.
 
 Options (``make_solver('gnsqp', prb, opts)``):
 
-================== ========== =========================================================
-``max_iter``       100        SQP iteration limit
-``tol``            1e-6       stationarity tolerance (inf-norm of the Lagrangian gradient)
-``tol_constr``     1e-8       constraint-violation tolerance
-``tol_step``       1e-10      step tolerance (inf-norm)
-``qp_solver``      'qrqp'     'qrqp', 'osqp', 'qpoases' or 'proxqp' (any CasADi conic)
-``qp_options``     {}         options handed to the QP solver plugin (merged over ours)
-``regularization`` 1e-8       ``reg`` added to the Gauss-Newton Hessian's diagonal
-``armijo``         1e-4       sufficient-decrease constant of the line search
-``min_step``       1e-8       smallest step length tried before giving up
-``sym``            'SX'       graph type of the transcription ('SX' or 'MX')
-================== ========== =========================================================
+=================== ========== ========================================================
+``max_iter``        100        SQP iteration limit
+``tol``             1e-6       scaled stationarity tolerance
+``tol_constr``      1e-8       constraint-violation tolerance
+``tol_step``        1e-10      step tolerance (inf-norm)
+``qp_solver``       'qrqp'     'qrqp' (default: most reliable here), 'proxqp', 'osqp',
+                               'qpoases' (dense: slow beyond a few hundred variables)
+``qp_options``      {}         options handed to the QP plugin (merged over ours)
+``regularization``  1e-8       ``reg`` added to the Gauss-Newton Hessian's diagonal
+``armijo``          1e-4       sufficient-decrease constant of the line search
+``nonmonotone``     3          merit values the Armijo test compares against (1: monotone)
+``min_step``        1e-8       smallest step length tried before giving up
+``elastic_penalty`` 1e4        l1 penalty of the elastic QP's slacks (at least ``mu``)
+``sym``             'SX'       graph type of the transcription ('SX' or 'MX')
+=================== ========== ========================================================
 """
 
 from __future__ import annotations
@@ -52,7 +65,7 @@ log = logging.getLogger(__name__)
 QP_DEFAULTS: dict[str, dict[str, Any]] = {
     "qrqp": {"print_iter": False, "print_header": False, "print_info": False,
              "max_iter": 10000, "error_on_fail": False},
-    "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-10, "eps_rel": 1e-10, "polish": True,
+    "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-6, "eps_rel": 1e-6, "polish": True,
                       "max_iter": 100000}, "warm_start_primal": True, "warm_start_dual": True,
              "error_on_fail": False},
     "qpoases": {"printLevel": "none", "sparse": True, "error_on_fail": False},
@@ -84,8 +97,14 @@ class GnSqpSolver(Solver):
                              "them as residuals with create_cost()")
         super().__init__(prb, opts)
         tr = self.transcription = Transcription(prb, sym=self.opts["sym"])
-        w, P, R, g = tr.nlp["x"], tr.nlp["p"], tr.residual, tr.nlp["g"]
-        T = type(w)
+        # The SQP works on w and g sorted stage-wise (see Transcription.node_order): the
+        # KKT matrices are then banded and the QP factorisations stay sparse.
+        self._pw, self._pg = tr.node_order()
+        T = type(tr.nlp["x"])
+        w, P = T.sym("w", tr.nw), tr.nlp["p"]
+        w_orig = w[np.argsort(self._pw)]
+        R, g = cs.Function("nlp", [tr.nlp["x"], P], [tr.residual, tr.nlp["g"]])(w_orig, P)
+        g = g[self._pg]
         reg, lam_g, lam_x = T.sym("reg"), T.sym("lam_g", tr.ng), T.sym("lam_x", tr.nw)
         J_R, J_g = cs.jacobian(R, w), cs.jacobian(g, w)
         H = 2 * cs.mtimes(J_R.T, J_R) + reg * T.eye(tr.nw)
@@ -152,20 +171,24 @@ class GnSqpSolver(Solver):
     # ------------------------------------------------------------------ solve
     def _solve(self) -> bool:
         o, tr = self.opts, self.transcription
-        lbx, ubx = tr.bounds_w()
-        lbg, ubg = tr.bounds_g()
+        pw, pg = self._pw, self._pg  # everything below is in stage-wise order
+        lbx, ubx = (b[pw] for b in tr.bounds_w())
+        lbg, ubg = (b[pg] for b in tr.bounds_g())
         p = tr.parameters()
-        w = np.clip(tr.initial_w(), lbx, ubx)
-        lam_g = self.lam_g if self.lam_g is not None else np.zeros(tr.ng)
-        lam_x = self.lam_x if self.lam_x is not None else np.zeros(tr.nw)
+        w = np.clip(tr.initial_w()[pw], lbx, ubx)
+        lam_g = self.lam_g[pg] if self.lam_g is not None else np.zeros(tr.ng)
+        lam_x = self.lam_x[pw] if self.lam_x is not None else np.zeros(tr.nw)
         history: list[dict[str, float]] = []
         self._merit_history: list[float] = []
         self._elastic_steps = 0
         mu, status, alpha, step, success = 0.0, "max_iter reached", 1.0, np.inf, False
+        timing = {"linearize": 0.0, "qp": 0.0, "line_search": 0.0}
         t0 = time.perf_counter()
         it = 0
         for it in range(o["max_iter"] + 1):
+            tic = time.perf_counter()
             H, grad, f, g, J, stat = self._linearize(w, p, o["regularization"], lam_g, lam_x)
+            timing["linearize"] += time.perf_counter() - tic
             grad, g, f = grad.full().ravel(), g.full().ravel(), float(f)
             # dual scaling as IPOPT's: large multipliers relax the stationarity test
             scale = max(100.0, (np.abs(lam_g).sum() + np.abs(lam_x).sum())
@@ -179,12 +202,16 @@ class GnSqpSolver(Solver):
                 break
             if it == o["max_iter"]:
                 break
+            tic = time.perf_counter()
             res = self._step(H, grad, J, g, w, lbx, ubx, lbg, ubg, lam_g, lam_x, mu)
+            timing["qp"] += time.perf_counter() - tic
             if res is None:
                 status = (f"QP failed ({self._qp_solver(True).stats().get('return_status')})")
                 break
             d, lg_qp, lx_qp, slack, mu = res
+            tic = time.perf_counter()
             alpha = self._line_search(w, d, p, f, g, grad, mu, slack, lbg, ubg)
+            timing["line_search"] += time.perf_counter() - tic
             if alpha is None:
                 status, alpha = "line search failed", 0.0
                 break
@@ -193,15 +220,17 @@ class GnSqpSolver(Solver):
             lam_x = lam_x + alpha * (lx_qp - lam_x)
             step = alpha * float(np.max(np.abs(d), initial=0.0))
         elapsed = time.perf_counter() - t0
-        self.w, self.lam_g, self.lam_x = w, lam_g, lam_x
-        self._split_solution(*tr.unpack(w))
+        self.w, self.lam_g, self.lam_x = (np.empty_like(v) for v in (w, lam_g, lam_x))
+        self.w[pw], self.lam_g[pg], self.lam_x[pw] = w, lam_g, lam_x
+        self._split_solution(*tr.unpack(self.w))
         s = self.stats
         last = history[-1]
         s.success, s.status, s.iterations, s.time = success, status, it, elapsed
         s.cost, s.constraint_violation = last["cost"], last["violation"]
         s.history = history
         s.extra = {"stationarity": last["stationarity"], "qp_solver": o["qp_solver"],
-                   "elastic_steps": self._elastic_steps}
+                   "elastic_steps": self._elastic_steps,
+                   **{f"t_{k}": v for k, v in timing.items()}}
         log.debug("gnsqp: %s in %d iterations, %.4f s, cost %.6g, violation %.2e", status, it,
                   elapsed, s.cost, s.constraint_violation)
         return success
