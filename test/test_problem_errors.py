@@ -1,0 +1,127 @@
+"""Bad input to the Problem API and the solver factory: each a clear exception naming what
+is wrong."""
+
+from __future__ import annotations
+
+import casadi as cs
+import numpy as np
+import pytest
+
+from horizon_mpc.problem import Problem
+from horizon_mpc.solvers import make_solver
+
+
+@pytest.fixture
+def prb() -> Problem:
+    p = Problem(10)
+    x = p.create_state_variable("x", 2)
+    u = p.create_input_variable("u", 1)
+    p.set_dynamics(cs.vertcat(x[1], u))
+    p.set_dt(0.1)
+    return p
+
+
+def test_bounds_of_wrong_dimension_name_the_variable(prb):
+    with pytest.raises(ValueError, match=r"lower bound of 'x'.*shape \(3,\)"):
+        prb.get_variable("x").set_bounds([0, 0, 0], [1, 1, 1])
+
+
+def test_initial_guess_of_wrong_node_count_is_refused(prb):
+    with pytest.raises(ValueError, match="initial guess of 'u'"):
+        prb.get_variable("u").set_initial_guess(np.zeros((1, 11)))  # inputs live on 10 nodes
+
+
+def test_dynamics_of_wrong_dimension_state_the_expected_shape():
+    p = Problem(5)
+    x = p.create_state_variable("x", 2)
+    with pytest.raises(ValueError, match=r"expected an expression of shape \(2, 1\)"):
+        p.set_dynamics(x[0])
+
+
+def test_unknown_variable_name_lists_the_known_ones(prb):
+    with pytest.raises(KeyError, match="unknown variable 'y'; variables are: x, u"):
+        prb.get_variable("y")
+
+
+def test_unknown_term_name_is_reported(prb):
+    prb.create_cost("effort", prb.get_variable("u"))
+    with pytest.raises(KeyError, match="unknown constraint or cost 'efort'"):
+        prb.get_term("efort")
+
+
+def test_variable_nodes_out_of_range_give_the_valid_range(prb):
+    with pytest.raises(IndexError, match=r"nodes \[11\] out of range.*0\.\.10"):
+        prb.get_variable("x").set_bounds(0, 1, nodes=11)
+
+
+def test_input_bounds_on_the_final_node_are_out_of_range(prb):
+    with pytest.raises(IndexError, match=r"nodes \[10\] out of range.*0\.\.9"):
+        prb.get_variable("u").set_bounds(-1, 1, nodes=10)
+
+
+def test_constraint_with_input_on_final_node_names_the_valid_nodes(prb):
+    with pytest.raises(IndexError, match=r"on nodes \[10\].*valid nodes: 0\.\.9"):
+        prb.create_constraint("c", prb.get_variable("u"), nodes=[5, 10])
+
+
+def test_offset_term_excludes_the_first_node(prb):
+    u = prb.get_variable("u")
+    with pytest.raises(IndexError, match=r"nodes \[0\]"):
+        prb.create_cost("rate", u - u.offset(-1), nodes=0)
+
+
+def test_state_created_after_the_dynamics_is_refused(prb):
+    with pytest.raises(RuntimeError, match="after set_dynamics"):
+        prb.create_state_variable("z", 1)
+
+
+def test_input_created_after_the_dynamics_is_refused(prb):
+    with pytest.raises(RuntimeError, match="after set_dynamics"):
+        prb.create_input_variable("w", 1)
+
+
+def test_duplicate_names_are_refused(prb):
+    with pytest.raises(ValueError, match="'x' already exists"):
+        prb.create_parameter("x", 1)
+    prb.create_cost("c", prb.get_variable("u"))
+    with pytest.raises(ValueError, match="'c' already exists"):
+        prb.create_constraint("c", prb.get_variable("x"))
+
+
+def test_foreign_symbols_in_a_term_are_refused(prb):
+    with pytest.raises(ValueError, match="not variables of this problem"):
+        prb.create_cost("c", cs.SX.sym("alien"))
+
+
+def test_unknown_transcription_and_integrator_list_the_choices(prb):
+    with pytest.raises(ValueError, match="unknown transcription 'shooting'"):
+        prb.transcribe("shooting")
+    with pytest.raises(ValueError, match="unknown integrator 'rk5'"):
+        prb.transcribe("multiple_shooting", integrator="rk5")
+
+
+def test_solving_without_dt_says_so():
+    p = Problem(3)
+    x = p.create_state_variable("x", 1)
+    p.set_dynamics(-x)
+    with pytest.raises(RuntimeError, match="dt is not set"):
+        make_solver("ipopt", p)
+
+
+def test_unknown_solver_and_option_are_reported(prb):
+    with pytest.raises(ValueError, match="unknown solver 'snopt'"):
+        make_solver("snopt", prb)
+    with pytest.raises(ValueError, match=r"unknown option\(s\) \['maxiter'\]"):
+        make_solver("ipopt", prb, {"maxiter": 3})
+
+
+def test_gnsqp_refuses_a_general_cost_and_names_it(prb):
+    prb.create_general_cost("energy", prb.get_variable("u")[0] ** 4)
+    with pytest.raises(ValueError, match=r"general cost\(s\) \['energy'\].*'ipopt'"):
+        make_solver("gnsqp", prb)
+
+
+def test_terms_cannot_be_added_once_built_into_a_solver(prb):
+    make_solver("ipopt", prb)
+    with pytest.raises(RuntimeError, match="already built into a solver"):
+        prb.create_cost("late", prb.get_variable("u"))
