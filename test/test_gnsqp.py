@@ -1,0 +1,114 @@
+"""The Gauss-Newton SQP: same optima as IPOPT on the reference problems, warm starts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from horizon_mpc.examples import (
+    build_cartpole,
+    build_double_integrator,
+    build_pendulum_min_time,
+    double_integrator_optimum,
+)
+from horizon_mpc.solvers import make_solver
+
+
+def solve_both(build, **gn_opts):
+    """Solve fresh copies of a problem with ipopt and gnsqp from the same initial guess."""
+    out = []
+    for name, opts in (("ipopt", {}), ("gnsqp", {"max_iter": 300, **gn_opts})):
+        prb, _ = build()
+        solver = make_solver(name, prb, opts)
+        assert solver.solve(), f"{name}: {solver.stats.status}"
+        out.append(solver)
+    return out
+
+
+def test_double_integrator_is_solved_in_one_step():
+    # a convex QP: the Gauss-Newton model is exact
+    prb, _ = build_double_integrator(50)
+    solver = make_solver("gnsqp", prb)
+    assert solver.solve()
+    u_star, cost = double_integrator_optimum(50)
+    np.testing.assert_allclose(solver.solution["u"][0], u_star, atol=1e-6)
+    assert solver.stats.cost == pytest.approx(cost, abs=1e-6)
+    assert solver.stats.iterations == 1
+
+
+def test_cartpole_swing_up_matches_ipopt():
+    ip, gn = solve_both(lambda: build_cartpole(100))
+    assert gn.stats.cost == pytest.approx(ip.stats.cost, rel=1e-4)
+    assert gn.stats.constraint_violation <= 1e-6
+    np.testing.assert_allclose(gn.solution["u"], ip.solution["u"], atol=1e-3)
+
+
+def test_cartpole_with_input_bounds_and_cart_limit_matches_ipopt():
+    ip, gn = solve_both(lambda: build_cartpole(100, u_max=12.0, cart_limit=0.5))
+    assert gn.stats.cost == pytest.approx(ip.stats.cost, rel=1e-4)
+    assert gn.stats.constraint_violation <= 1e-6
+    assert np.max(np.abs(gn.solution["u"])) <= 12.0 + 1e-9
+
+
+def test_pendulum_minimum_time_matches_ipopt():
+    ip, gn = solve_both(lambda: build_pendulum_min_time(50))
+    assert gn.stats.cost == pytest.approx(ip.stats.cost, rel=1e-4)
+    assert gn.solution["dt"].item() == pytest.approx(ip.solution["dt"].item(), rel=1e-4)
+    assert gn.stats.constraint_violation <= 1e-6
+
+
+def test_cartpole_collocation_matches_ipopt():
+    ip, gn = solve_both(lambda: build_cartpole(100, transcription="direct_collocation"))
+    assert gn.stats.cost == pytest.approx(ip.stats.cost, rel=1e-4)
+    assert gn.stats.constraint_violation <= 1e-6
+
+
+@pytest.mark.parametrize("qp_solver", ["qrqp", "proxqp", "osqp"])
+def test_qp_solvers_are_selectable(qp_solver):
+    prb, _ = build_cartpole(30)
+    solver = make_solver("gnsqp", prb, {"qp_solver": qp_solver, "max_iter": 300})
+    assert solver.solve(), solver.stats.status
+    assert solver.stats.extra["qp_solver"] == qp_solver
+    ip = make_solver("ipopt", build_cartpole(30)[0])
+    ip.solve()
+    assert solver.stats.cost == pytest.approx(ip.stats.cost, rel=1e-4)
+
+
+def test_history_records_every_iteration_and_stops_on_convergence():
+    prb, _ = build_cartpole(50)
+    solver = make_solver("gnsqp", prb, {"max_iter": 300})
+    assert solver.solve()
+    hist = solver.stats.history
+    assert len(hist) == solver.stats.iterations + 1
+    assert hist[-1]["violation"] <= 1e-8
+    assert hist[-1]["stationarity"] <= 1e-6 or hist[-1]["step"] <= 1e-10
+    assert solver.stats.status == "converged"
+
+
+def test_max_iter_stops_with_failure():
+    prb, _ = build_cartpole(50)
+    solver = make_solver("gnsqp", prb, {"max_iter": 3})
+    assert not solver.solve()
+    assert solver.stats.status == "max_iter reached" and solver.stats.iterations == 3
+
+
+def test_warm_resolve_after_convergence_takes_no_step():
+    prb, _ = build_cartpole(50)
+    solver = make_solver("gnsqp", prb, {"max_iter": 300})
+    assert solver.solve()
+    assert solver.solve()  # primal and duals already optimal
+    assert solver.stats.iterations <= 1
+
+
+def test_receding_horizon_shift_then_warm_resolve():
+    prb, v = build_cartpole(60)
+    solver = make_solver("gnsqp", prb, {"max_iter": 300})
+    assert solver.solve()
+    cold = solver.stats.iterations
+    solver.shift()
+    for name in ("q", "v"):
+        x0 = v[name].initial_guess[:, 0]
+        v[name].set_bounds(x0, x0, nodes=0)
+    assert solver.solve()
+    assert solver.stats.iterations < cold
+    np.testing.assert_allclose(solver.solution["q"][:, -1], [0.0, np.pi], atol=1e-6)
