@@ -199,3 +199,15 @@ def test_sx_and_mx_graphs_give_the_same_solution():
         assert solver.solve()
         costs.append(solver.stats.cost)
     assert costs[0] == pytest.approx(costs[1], rel=1e-9)
+
+
+def test_active_constraint_rows_give_a_smaller_nlp_with_the_same_optimum():
+    full = make_solver("ipopt", build_cartpole(50)[0])
+    prb, _ = build_cartpole(50)
+    trimmed = make_solver("ipopt", prb, {"constraint_rows": "active"})
+    assert trimmed.transcription.ng == full.transcription.ng - 4 * 50  # goal rows on node N
+    assert full.solve() and trimmed.solve()
+    assert trimmed.stats.cost == pytest.approx(full.stats.cost, rel=1e-9)
+    prb.get_term("goal_q").set_nodes(40)
+    with pytest.raises(ValueError, match=r"'goal_q' is active on nodes \[40\] that have no rows"):
+        trimmed.solve()

@@ -16,7 +16,8 @@ Layout (column-major, one column per node, N = ``n_nodes``)::
 rows are the multiple-shooting defects ``x_{k+1} (-) F(x_k, u_k, s, p_k)`` (ndx rows) or the
 collocation equations ``dt f(X_kj) - sum_i C_ij X_ki`` (nx*d rows) followed by the continuity
 ``x_{k+1} - sum_i D_i X_ki`` (nx rows). A constraint is evaluated on every node where it is
-*valid*; nodes where it is not *active* get the bounds (-inf, +inf). A cost's residual is
+*valid* (option ``constraint_rows='active'``: only where it is active when built); nodes
+where it is not *active* get the bounds (-inf, +inf). A cost's residual is
 multiplied by ``sqrt(weight)`` per row and node, 0 on inactive nodes, so ``R`` is the
 Gauss-Newton residual vector and ``f = ||R||^2`` without general costs.
 
@@ -85,6 +86,10 @@ class Transcription:
         sym: ``'SX'`` (scalar graph, fastest evaluation for small and medium problems) or
             ``'MX'`` (mapped SX node functions in a matrix graph: smaller memory, faster
             construction for large problems).
+        constraint_rows: ``'valid'`` (default): a constraint has rows on every node where
+            it is valid, so its node set can change freely between solves; ``'active'``:
+            rows only on the nodes active now (a smaller NLP: IPOPT keeps a slack for every
+            row, bounded or not), and activating another node later raises ``ValueError``.
 
     Attributes:
         nlp: ``{'x': w, 'p': P, 'f': f, 'g': g}`` for ``casadi.nlpsol``.
@@ -93,9 +98,12 @@ class Transcription:
         w_blocks, g_blocks: :class:`Block` layouts of ``w`` and ``g``.
     """
 
-    def __init__(self, prb: Problem, sym: str = "SX"):
+    def __init__(self, prb: Problem, sym: str = "SX", constraint_rows: str = "valid"):
         if sym not in ("SX", "MX"):
             raise ValueError(f"sym must be 'SX' or 'MX', got {sym!r}")
+        if constraint_rows not in ("valid", "active"):
+            raise ValueError(f"constraint_rows must be 'valid' or 'active', got "
+                             f"{constraint_rows!r}")
         prb.finalize()
         self.prb = prb
         self.sym = sym
@@ -142,12 +150,15 @@ class Transcription:
             defects = dyn.map(N)(X[:, :-1], Xc, U, S, Pv[:, :-1], X[:, 1:])
         self.g_blocks.append(Block("dynamics", 0, defects.shape[0], N))
         g.append(cs.vec(defects))
-        # constraints on all valid nodes
+        # constraints on all valid nodes (or on the nodes active now)
         self.constraints = list(prb.constraints.values())
+        self.constraint_rows = constraint_rows
+        self.row_nodes: dict[str, np.ndarray] = {}
         for c in self.constraints:
-            val = node_args(c)
-            self.g_blocks.append(Block(c.name, self.g_blocks[-1].stop, c.dim,
-                                       c.valid_nodes.size))
+            rows = c.valid_nodes if constraint_rows == "valid" else c.nodes
+            self.row_nodes[c.name] = rows
+            val = node_args(c)[:, (rows - c.valid_nodes[0]).tolist()]
+            self.g_blocks.append(Block(c.name, self.g_blocks[-1].stop, c.dim, rows.size))
             g.append(cs.vec(val))
         self.ng = self.g_blocks[-1].stop
         # costs
@@ -220,8 +231,14 @@ class Transcription:
         (-inf, inf) on inactive ones."""
         lbg, ubg = np.zeros(self.ng), np.zeros(self.ng)
         for c, b in zip(self.constraints, self.g_blocks[1:], strict=True):
-            v = c.valid_nodes
+            v = self.row_nodes[c.name]
             act = c.active[v]
+            if act.sum() != c.nodes.size:
+                raise ValueError(
+                    f"constraint {c.name!r} is active on nodes "
+                    f"{np.setdiff1d(c.nodes, v).tolist()} that have no rows in this NLP "
+                    "(built with constraint_rows='active'); build the solver with "
+                    "constraint_rows='valid' to move constraints freely")
             lo, hi = c.lower_bounds[:, v], c.upper_bounds[:, v]
             lbg[b.start:b.stop] = np.where(act, lo, -np.inf).ravel("F")
             ubg[b.start:b.stop] = np.where(act, hi, np.inf).ravel("F")
@@ -253,7 +270,7 @@ class Transcription:
         b = self.g_blocks[0]
         gn[b.start:b.stop] = np.repeat(np.arange(b.cols) + 0.5, b.rows)
         for c, b in zip(self.constraints, self.g_blocks[1:], strict=True):
-            gn[b.start:b.stop] = np.repeat(c.valid_nodes.astype(float), b.rows)
+            gn[b.start:b.stop] = np.repeat(self.row_nodes[c.name].astype(float), b.rows)
         return np.argsort(wn, kind="stable"), np.argsort(gn, kind="stable")
 
     def unpack(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

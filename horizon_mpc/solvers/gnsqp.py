@@ -41,6 +41,7 @@ Options (``make_solver('gnsqp', prb, opts)``):
 ``min_step``        1e-8       smallest step length tried before giving up
 ``elastic_penalty`` 1e4        l1 penalty of the elastic QP's slacks (at least ``mu``)
 ``sym``             'SX'       graph type of the transcription ('SX' or 'MX')
+``constraint_rows`` 'valid'    'valid' or 'active' (see ``Transcription``)
 =================== ========== ========================================================
 """
 
@@ -85,7 +86,7 @@ class GnSqpSolver(Solver):
     DEFAULTS: dict[str, Any] = {
         "max_iter": 100, "tol": 1e-6, "tol_constr": 1e-8, "tol_step": 1e-10,
         "qp_solver": "qrqp", "qp_options": {}, "regularization": 1e-8, "armijo": 1e-4,
-        "min_step": 1e-8, "sym": "SX", "nonmonotone": 3,
+        "min_step": 1e-8, "sym": "SX", "constraint_rows": "valid", "nonmonotone": 3,
         "elastic_penalty": 1e4,
     }
 
@@ -96,7 +97,8 @@ class GnSqpSolver(Solver):
                              f"{general} need a full Hessian: use the 'ipopt' solver, or write "
                              "them as residuals with create_cost()")
         super().__init__(prb, opts)
-        tr = self.transcription = Transcription(prb, sym=self.opts["sym"])
+        tr = self.transcription = Transcription(
+            prb, sym=self.opts["sym"], constraint_rows=self.opts["constraint_rows"])
         # The SQP works on w and g sorted stage-wise (see Transcription.node_order): the
         # KKT matrices are then banded and the QP factorisations stay sparse.
         self._pw, self._pg = tr.node_order()
@@ -124,8 +126,8 @@ class GnSqpSolver(Solver):
 
     def set_option(self, key: str, value: Any) -> None:
         """Change one option; a new QP solver is built on the next solve if needed."""
-        if key == "sym" and value != self.opts["sym"]:
-            raise ValueError("option 'sym' fixes the NLP graph; set it when building the solver")
+        if key in ("sym", "constraint_rows") and value != self.opts[key]:
+            raise ValueError(f"option {key!r} fixes the NLP; set it when building the solver")
         super().set_option(key, value)
         if key in ("qp_solver", "qp_options", "regularization"):
             self._qp.clear()
@@ -158,7 +160,9 @@ class GnSqpSolver(Solver):
         rho = max(self.opts["elastic_penalty"], mu)
         qp = self._qp_solver(elastic=True)
         eye = cs.DM.eye(ng)
-        zeros, infs = np.zeros(2 * ng), np.full(2 * ng, np.inf)
+        # rows without a finite bound cannot be violated: their slacks are fixed at 0
+        free = np.isinf(lbg) & np.isinf(ubg)
+        zeros, infs = np.zeros(2 * ng), np.where(np.tile(free, 2), 0.0, np.inf)
         sol = qp(h=cs.diagcat(H, self.opts["regularization"] * cs.DM.eye(2 * ng)),
                  g=np.concatenate([grad, np.full(2 * ng, rho)]), a=cs.horzcat(J, eye, -eye),
                  lba=lbg - g, uba=ubg - g, lbx=np.concatenate([lbx - w, zeros]),

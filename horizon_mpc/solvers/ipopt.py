@@ -2,19 +2,23 @@
 
 Options (``make_solver('ipopt', prb, opts)``):
 
-================== ======== ===========================================================
-``max_iter``       3000     IPOPT iteration limit
-``tol``            1e-8     IPOPT convergence tolerance
-``constr_viol_tol`` 1e-8    IPOPT constraint-violation tolerance
-``print_level``    0        IPOPT verbosity (0..12); ``print_time`` prints CasADi timings
-``linear_solver``  'mumps'  IPOPT linear solver ('mumps', 'spral')
-``sym``            'SX'     graph type of the transcription ('SX' or 'MX')
-``warm_start_duals`` True   keep multipliers between solves and start IPOPT from them
-``warm_mu_init``   1e-4     barrier parameter of a warm solve (cold solves use IPOPT's)
-``warm_bound_push`` 1e-6    ``warm_start_bound_push``/``_mult_bound_push`` of a warm solve
-``ipopt.<name>``   -        any other IPOPT option, passed through unchecked
-``nlpsol.<name>``  -        any CasADi nlpsol option (e.g. ``nlpsol.expand``)
-================== ======== ===========================================================
+=================== ======== ==========================================================
+``max_iter``        3000     IPOPT iteration limit
+``tol``             1e-8     IPOPT convergence tolerance
+``constr_viol_tol`` 1e-8     IPOPT constraint-violation tolerance
+``print_level``     0        IPOPT verbosity (0..12)
+``print_time``      False    CasADi's timing printout
+``linear_solver``   'mumps'  IPOPT linear solver ('mumps', 'spral')
+``sym``             'SX'     graph type of the transcription ('SX' or 'MX')
+``constraint_rows`` 'valid'  'valid' (node sets change freely) or 'active' (smaller
+                             NLP; see :class:`~horizon_mpc.problem.transcription.
+                             Transcription`)
+``warm_start_duals`` True    keep multipliers between solves and start IPOPT from them
+``warm_mu_init``    1e-4     barrier parameter of a warm solve (cold solves: IPOPT's)
+``warm_bound_push`` 1e-6     ``warm_start_bound_push``/``_mult_bound_push`` when warm
+``ipopt.<name>``    -        any other IPOPT option, passed through unchecked
+``nlpsol.<name>``   -        any CasADi nlpsol option (e.g. ``nlpsol.expand``)
+=================== ======== ==========================================================
 
 IPOPT options cannot change on an ``nlpsol`` instance, so a warm solve runs a second
 instance (``warm_start_init_point yes``) built once, on first need, from the same NLP.
@@ -50,14 +54,16 @@ class IpoptSolver(Solver):
     name = "ipopt"
     DEFAULTS: dict[str, Any] = {
         "max_iter": 3000, "tol": 1e-8, "constr_viol_tol": 1e-8, "print_level": 0,
-        "print_time": False, "linear_solver": "mumps", "sym": "SX", "warm_start_duals": True,
+        "print_time": False, "linear_solver": "mumps", "sym": "SX", "constraint_rows": "valid",
+        "warm_start_duals": True,
         "warm_mu_init": 1e-4, "warm_bound_push": 1e-6,
     }
     _IPOPT_ALIASES = ("max_iter", "tol", "constr_viol_tol", "print_level", "linear_solver")
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
-        self.transcription = Transcription(prb, sym=self.opts["sym"])
+        self.transcription = Transcription(
+            prb, sym=self.opts["sym"], constraint_rows=self.opts["constraint_rows"])
         self._solvers: dict[bool, cs.Function] = {}
         self.lam_x: np.ndarray | None = None
         self.lam_g: np.ndarray | None = None
@@ -68,8 +74,8 @@ class IpoptSolver(Solver):
 
     def set_option(self, key: str, value: Any) -> None:
         """Change one option; the IPOPT instances are rebuilt on the next solve."""
-        if key == "sym" and value != self.opts["sym"]:
-            raise ValueError("option 'sym' fixes the NLP graph; set it when building the solver")
+        if key in ("sym", "constraint_rows") and value != self.opts[key]:
+            raise ValueError(f"option {key!r} fixes the NLP; set it when building the solver")
         super().set_option(key, value)
         self._solvers.clear()
 
@@ -121,7 +127,7 @@ class IpoptSolver(Solver):
         s.cost = float(res["f"])
         s.constraint_violation = tr.violation(w, g, lbx, ubx, lbg, ubg)
         s.history = []
-        s.extra = {"warm": warm, "t_wall_ipopt": float(st.get("t_wall_total", np.nan))}
+        s.extra = {"warm": warm}
         log.debug("ipopt %s: %s in %d iterations, %.4f s, cost %.6g, violation %.2e",
                   "warm" if warm else "cold", s.status, s.iterations, s.time, s.cost,
                   s.constraint_violation)
