@@ -1,0 +1,24 @@
+"""The runnable example of doc/problem.md runs and gives what its comment says."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DOC = Path(__file__).resolve().parents[1] / "doc" / "problem.md"
+
+
+def test_cartpole_example_in_the_documentation_runs():
+    text = DOC.read_text()
+    section = text[text.index("## A runnable example"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    namespace: dict = {}
+    exec(compile(code, str(DOC), "exec"), namespace)  # noqa: S102 - our own documentation
+    solver = namespace["solver"]
+    assert solver.stats.iterations <= 12  # 9 with IPOPT 3.14 / MUMPS here
+    assert solver.stats.cost == pytest.approx(67.0675, abs=1e-4)
+    assert solver.solution["u"].shape == (1, 100)
+    np.testing.assert_allclose(solver.solution["q"][:, -1], [0.0, np.pi], atol=1e-8)
