@@ -112,3 +112,18 @@ def test_receding_horizon_shift_then_warm_resolve():
     assert solver.solve()
     assert solver.stats.iterations < cold
     np.testing.assert_allclose(solver.solution["q"][:, -1], [0.0, np.pi], atol=1e-6)
+
+
+def test_weights_node_sets_and_bounds_change_without_rebuild():
+    prb, v = build_double_integrator(20)
+    solver = make_solver("gnsqp", prb)
+    assert solver.solve()
+    functions = (solver._linearize, solver._qp_solver())
+    prb.get_term("arrive").set_nodes(10)  # arrive in half the time
+    prb.get_term("effort").set_nodes(range(10))
+    v["u"].set_bounds(-20.0, 20.0)  # active: the unconstrained peak is 23
+    solver.reset()
+    assert solver.solve()
+    assert np.max(np.abs(solver.solution["u"])) == pytest.approx(20.0, abs=1e-6)
+    assert solver.solution["x"][0, 10] == pytest.approx(1.0, abs=1e-8)
+    assert (solver._linearize, solver._qp_solver()) == functions

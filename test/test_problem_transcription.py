@@ -142,3 +142,13 @@ def test_double_integrator_nlp_optimum_is_the_exact_discrete_optimum(method):
     u_star, cost = double_integrator_optimum(20)
     np.testing.assert_allclose(U[0], u_star, atol=1e-9)
     assert float(sol["f"]) == pytest.approx(cost, rel=1e-10)
+
+
+def test_general_cost_counts_only_its_active_nodes():
+    prb, v = small_problem()
+    prb.create_general_cost("quartic", v["x"][0] ** 4, nodes=[2, 5])
+    tr = Transcription(prb)
+    w = np.random.default_rng(2).normal(size=tr.nw)
+    X, _, _ = tr.unpack(w)
+    general = cs.Function("l", [tr.nlp["x"], tr.nlp["p"]], [tr.general])(w, tr.parameters())
+    assert float(general) == pytest.approx(X[0, 2] ** 4 + X[0, 5] ** 4, rel=1e-12)
