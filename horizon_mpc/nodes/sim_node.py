@@ -18,20 +18,15 @@ drive the simulator and a controller deterministically in one process and one ex
 from __future__ import annotations
 
 import math
-import signal
-import threading
 import time
 from collections.abc import Sequence
 
-import rclpy
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -47,6 +42,7 @@ from horizon_mpc.nodes.conversions import (
     time_to_ns,
     vector3_from_msg,
 )
+from horizon_mpc.nodes.spin import spin_until_signal
 from horizon_mpc.sim.simulator import Simulator
 
 __all__ = ["SimNode", "main"]
@@ -317,32 +313,8 @@ class SimNode(Node):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    """Entry point of ``ros2 run horizon_mpc sim_node``; exit code 0 on SIGINT/SIGTERM.
-
-    The signals only set a flag that the spin loop checks (rclpy's own handlers would shut
-    the context down under a running executor, which can surface as an RCLError).
-    """
-    stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set())
-                for sig in (signal.SIGINT, signal.SIGTERM)}
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node: SimNode | None = None
-    executor = SingleThreadedExecutor()
-    try:
-        node = SimNode()
-        executor.add_node(node)
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    return 0
+    """Entry point of ``ros2 run horizon_mpc sim_node``; exit code 0 on SIGINT/SIGTERM."""
+    return spin_until_signal(SimNode, args)
 
 
 if __name__ == "__main__":
