@@ -56,7 +56,7 @@ import numpy as np
 
 from horizon_mpc.problem import Problem
 from horizon_mpc.problem.transcription import Transcription
-from horizon_mpc.solvers.base import Solver
+from horizon_mpc.solvers.nlp_solver import NlpSolver
 
 __all__ = ["GnSqpSolver"]
 
@@ -74,7 +74,7 @@ QP_DEFAULTS: dict[str, dict[str, Any]] = {
 }
 
 
-class GnSqpSolver(Solver):
+class GnSqpSolver(NlpSolver):
     """Gauss-Newton SQP with an l1-merit line search (see the module docstring).
 
     Attributes:
@@ -259,14 +259,3 @@ class GnSqpSolver(Solver):
             alpha *= 0.5
         return None
 
-    def shift(self) -> None:
-        """Shift the guesses and parameters (``Problem.shift``) and the multipliers."""
-        super().shift()
-        tr = self.transcription
-        if self.lam_x is not None:
-            self.lam_x = tr.shift_vector(self.lam_x, tr.w_blocks)
-            self.lam_g = tr.shift_vector(self.lam_g, tr.g_blocks)
-
-    def reset(self) -> None:
-        """Forget the multipliers: the next solve starts from zero multipliers."""
-        self.lam_x = self.lam_g = None

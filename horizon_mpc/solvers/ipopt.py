@@ -36,14 +36,14 @@ import numpy as np
 
 from horizon_mpc.problem import Problem
 from horizon_mpc.problem.transcription import Transcription
-from horizon_mpc.solvers.base import Solver
+from horizon_mpc.solvers.nlp_solver import NlpSolver
 
 __all__ = ["IpoptSolver"]
 
 log = logging.getLogger(__name__)
 
 
-class IpoptSolver(Solver):
+class IpoptSolver(NlpSolver):
     """Interior-point solve of the full NLP (general costs allowed).
 
     Attributes:
@@ -133,14 +133,3 @@ class IpoptSolver(Solver):
                   s.constraint_violation)
         return s.success
 
-    def shift(self) -> None:
-        """Shift the guesses and parameters (``Problem.shift``) and the multipliers."""
-        super().shift()
-        tr = self.transcription
-        if self.lam_x is not None:
-            self.lam_x = tr.shift_vector(self.lam_x, tr.w_blocks)
-            self.lam_g = tr.shift_vector(self.lam_g, tr.g_blocks)
-
-    def reset(self) -> None:
-        """Forget the multipliers: the next solve is cold."""
-        self.lam_x = self.lam_g = None
