@@ -209,16 +209,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(remove_ros_args(["closed_loop", *argv])[1:])  # tolerate --ros-args
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     segments = load_profile(args.profile)
-    print(f"closed loop: {args.robot}, {args.mode}, profile {args.profile}")
+    log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, args.profile)
     rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations)
     summary = summarise(rec, segments, mode=args.mode, robot=args.robot)
     written = write_report(rec, summary, args.out)
-    print(f"sim {summary['sim_time']:.2f} s in {summary['wall_time']:.1f} s wall "
-          f"(real-time factor {summary['real_time_factor']:.3f}); "
-          f"tick median {summary['tick_time_ms']['median']:.1f} ms; "
-          f"falls: {summary['falls']['count']}")
+    log.info("sim %.2f s in %.1f s wall (real-time factor %.3f); tick median %.1f ms; falls: %d",
+             summary["sim_time"], summary["wall_time"], summary["real_time_factor"],
+             summary["tick_time_ms"]["median"], summary["falls"]["count"])
     for path in written:
-        print(f"wrote {path}")
+        log.info("wrote %s", path)
     return 0
 
 
