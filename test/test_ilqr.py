@@ -187,3 +187,59 @@ def test_warm_resolve_needs_far_fewer_iterations_than_cold():
     cold = solver.stats.iterations
     assert solver.solve()  # the solution was written back as the initial guess
     assert solver.stats.iterations <= max(3, cold // 10)
+
+
+def _lq_with_equalities(n=20):
+    """LQ problem plus linear equalities on (x, u) and on x alone (velocity: relative
+    degree one, so the input of the node before can meet it)."""
+    prb, x, u = _lq_problem(n)
+    prb.create_constraint("mixed", u + 0.5 * x[1] - 0.2, nodes=range(2, 5))
+    prb.create_constraint("velocity", x[1] + 0.1, nodes=[6, n])
+    return prb
+
+
+def test_a_relative_degree_two_row_stays_with_the_augmented_lagrangian():
+    """A position row cannot be met by one input: it is not projected, yet it converges."""
+    prb, x, u = _lq_problem(20)
+    prb.create_constraint("position", x[0] - 0.3, nodes=[12, 20])
+    ok, solver = _solve(prb, "ilqr", OPTS)
+    assert ok, solver.stats.status
+    assert not solver._layout.any
+    assert abs(solver.solution["x"][0, 12] - 0.3) <= 1e-6
+
+
+@pytest.mark.parametrize("n", [20, 7])
+def test_linear_equalities_are_met_by_the_first_projected_step(n):
+    """Exact projection: one iteration lands on the equality-constrained LQ optimum."""
+    prb = _lq_with_equalities(n)
+    solver = make_solver("ilqr", prb, {**OPTS, "mu_init": 0.0, "mu_min": 0.0,
+                                       "rti": True, "iterations_per_call": 1})
+    solver.solve()
+    assert solver.stats.history[0]["alpha"] == 1.0
+    assert solver.stats.constraint_violation <= 1e-9
+    ref = make_solver("ipopt", _lq_with_equalities(n), {"ipopt.tol": 1e-12})
+    assert ref.solve()
+    np.testing.assert_allclose(solver.solution["u"], ref.solution["u"], atol=1e-6)
+    np.testing.assert_allclose(solver.solution["x"], ref.solution["x"], atol=1e-6)
+
+
+def test_projection_and_lagrangian_reach_the_same_optimum():
+    """The two equality treatments agree on a nonlinear problem (cart-pole, mid-swing equality)."""
+    sols = {}
+    for mode in ("projection", "lagrangian"):
+        prb, var = build_cartpole(n_nodes=60)
+        q = var["q"]
+        prb.create_constraint("pole_level", q[1] - np.pi / 2, nodes=[30])
+        ok, solver = _solve(prb, "ilqr", {**OPTS, "equality": mode})
+        assert ok, solver.stats.status
+        sols[mode] = solver
+    a, b = sols["projection"], sols["lagrangian"]
+    assert abs(a.stats.cost - b.stats.cost) <= 1e-4 * abs(b.stats.cost)
+    assert a.stats.constraint_violation <= 1e-6
+    assert a.stats.iterations <= b.stats.iterations
+
+
+def test_unknown_equality_mode_is_refused():
+    prb, _, _ = _lq_problem()
+    with pytest.raises(ValueError, match="equality"):
+        make_solver("ilqr", prb, {**OPTS, "equality": "barrier"})

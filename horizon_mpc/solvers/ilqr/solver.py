@@ -25,6 +25,7 @@ import numpy as np
 
 from horizon_mpc.problem import Problem
 from horizon_mpc.solvers.base import Solver
+from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
 from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian
 from horizon_mpc.solvers.ilqr.riccati import backward_pass, linear_rollout
 from horizon_mpc.solvers.ilqr.stages import build_stage_model
@@ -49,7 +50,13 @@ class IlqrSolver(Solver):
     ``tol_constraint`` (defects, constraints, bounds; inf-norm); ``mu_init``/``mu_min``/
     ``mu_max`` (regularisation); ``rho_init``/``rho_factor``/``rho_max`` (AL penalty);
     ``line_search_steps`` (number of halvings); ``time_budget`` (s per call, None: none);
-    ``codegen`` (compile the node functions); ``callback`` (called with a dict per iteration).
+    ``codegen`` (compile the node functions); ``callback`` (called with a dict per iteration);
+    ``equality``: ``'projection'`` (equality rows handled exactly in the backward pass,
+    see :mod:`.equality`; rows that do not fit a node's inputs use the augmented
+    Lagrangian) or ``'lagrangian'`` (every row through the augmented Lagrangian);
+    ``line_search``: False takes every full step (the classic real-time iteration of an
+    MPC, where the next tick corrects the linearisation error); a step whose evaluation is
+    not finite is still rejected.
     """
 
     name = "ilqr"
@@ -69,6 +76,8 @@ class IlqrSolver(Solver):
         "time_budget": None,
         "codegen": True,
         "callback": None,
+        "equality": "projection",
+        "line_search": True,
     }
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
@@ -80,6 +89,13 @@ class IlqrSolver(Solver):
                                        self.opts["rho_init"])
         self._alN = AugmentedLagrangian(np.full((1, m.ncN), -np.inf),
                                         np.full((1, m.ncN), np.inf), self.opts["rho_init"])
+        if self.opts["equality"] not in ("projection", "lagrangian"):
+            raise ValueError(f"ilqr option 'equality' must be 'projection' or 'lagrangian', "
+                             f"got {self.opts['equality']!r}")
+        self._layout = EqualityLayout.empty(N, m.nc_con, m.ncN_con)
+        self._eq_rows = self._layout.stage_rows()
+        self._uses_input = np.concatenate(
+            [np.full(c.dim, bool(c.uses_input)) for c in m.stage_cons] or [np.zeros(0, bool)])
         self.mu = self.opts["mu_init"]
         self._difference = prb.state_difference()
         self.feedback_gains = np.zeros((N, m.nu, m.ndx))
@@ -114,7 +130,6 @@ class IlqrSolver(Solver):
         lb[:, i:i + m.nx], ub[:, i:i + m.nx] = xlb[:, :N].T, xub[:, :N].T
         i += m.nx
         lb[:, i:], ub[:, i:] = ulb.T, uub.T
-        self._al.set_bounds(lb, ub)
         lbN, ubN = np.full((1, m.ncN), -np.inf), np.full((1, m.ncN), np.inf)
         i = 0
         for con in m.term_cons:
@@ -123,6 +138,16 @@ class IlqrSolver(Solver):
                 ubN[0, i:i + con.dim] = con.upper_bounds[:, N]
             i += con.dim
         lbN[0, i:], ubN[0, i:] = xlb[:, N], xub[:, N]
+        if self.opts["equality"] == "projection":
+            nc, ncN = m.nc_con, m.ncN_con
+            self._layout = EqualityLayout.from_bounds(
+                lb[:, :nc], ub[:, :nc], self._uses_input, lbN[0, :ncN], ubN[0, :ncN], m.nu,
+                m.con_reach, m.conN_reach)
+            self._eq_rows = self._layout.stage_rows()
+            # projected rows leave the augmented Lagrangian
+            lb[:, :nc][self._eq_rows], ub[:, :nc][self._eq_rows] = -np.inf, np.inf
+            lbN[0, :ncN][self._layout.term], ubN[0, :ncN][self._layout.term] = -np.inf, np.inf
+        self._al.set_bounds(lb, ub)
         self._alN.set_bounds(lbN, ubN)
         self.Wr = self._weights(m.stage_costs, N, range(N))  # (N, nr)
         self.WrN = self._weights(m.term_costs, 1, [N])  # (1, nrN)
@@ -151,25 +176,31 @@ class IlqrSolver(Solver):
             ev["d0"] = np.zeros(m.ndx)
         if not all(np.all(np.isfinite(v)) for v in ev.values()):
             return None
+        lay = self._layout
+        eq = np.where(self._eq_rows, ev["c"][:, :m.nc_con] - lay.b, 0.0)
+        eqN = np.where(lay.term, ev["cN"][0, :m.ncN_con] - lay.bN, 0.0)
+        ev["eq_l1"] = float(np.sum(np.abs(eq)) + np.sum(np.abs(eqN)))
         ev["cost"] = float(np.sum(self.Wr * ev["r"] ** 2) + np.sum(self.WrN * ev["rN"] ** 2))
         ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
         ev["gap_l1"] = float(np.sum(np.abs(ev["gap"])) + np.sum(np.abs(ev["d0"])))
         ev["viol"] = float(max(
             np.max(np.abs(ev["gap"]), initial=0.0), np.max(np.abs(ev["d0"]), initial=0.0),
+            np.max(np.abs(eq), initial=0.0), np.max(np.abs(eqN), initial=0.0),
             np.max(self._al.violation(ev["c"]), initial=0.0),
             np.max(self._alN.violation(ev["cN"]), initial=0.0)))
         return ev
 
     def _merit(self, ev: dict[str, Any], nu: float) -> float:
-        return ev["cost"] + ev["al"] + nu * ev["gap_l1"]
+        return ev["cost"] + ev["al"] + nu * (ev["gap_l1"] + ev["eq_l1"])
 
     def _quadratise(self, X, U, ev):
         m, N = self.model, self.model.n_nodes
         wc, tc = self._al.weights_targets(ev["c"])
         wcN, tcN = self._alN.weights_targets(ev["cN"])
-        A, B, lx, lu, lxx, luu, lux = m.quadratise(X[:N].T, U.T, self.S, self.P[:, :N],
-                                                   self.Wr.T, wc.T, tc.T)
-        lxN, lxxN = m.quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T, tcN.T)
+        A, B, lx, lu, lxx, luu, lux, cx, cu = m.quadratise(
+            X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T, tc.T)
+        lxN, lxxN, cxN = m.quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
+                                           tcN.T)
         ndx, nu = m.ndx, m.nu
         q = {
             "A": _blocks(A, N, ndx, ndx), "B": _blocks(B, N, ndx, nu),
@@ -178,6 +209,10 @@ class IlqrSolver(Solver):
             "lux": _blocks(lux, N, nu, ndx),
             "lxN": np.asarray(lxN).reshape(ndx), "lxxN": np.asarray(lxxN).reshape(ndx, ndx),
         }
+        if self._layout.any:
+            q["cx"] = _blocks(cx, N, m.nc_con, ndx)
+            q["cu"] = _blocks(cu, N, m.nc_con, nu)
+            q["cxN"] = np.asarray(cxN).reshape(m.ncN_con, ndx)
         if not all(np.all(np.isfinite(v)) for v in q.values()):
             return None
         return q
@@ -201,10 +236,16 @@ class IlqrSolver(Solver):
             self.mu = min(max(self.mu * 100, 1e-6), o["mu_max"])
             info["status_nan"] = 1.0
             return ev, info
+        proj = None
+        if self._layout.any:
+            nc, ncN = m.nc_con, m.ncN_con
+            proj = project(self._layout, ev["c"][:, :nc], q["cx"], q["cu"], ev["cN"][0, :ncN],
+                           q["cxN"], q["A"], q["B"], ev["gap"])
+            info["rank_deficient_nodes"] = float(proj.rank_deficient)
         # backward pass; raise the regularisation until every Q_uu is positive definite
         while True:
             bw = backward_pass(q["A"], q["B"], q["lx"], q["lu"], q["lxx"], q["luu"], q["lux"],
-                               ev["gap"], q["lxN"], q["lxxN"], self.mu)
+                               ev["gap"], q["lxN"], q["lxxN"], self.mu, proj)
             if bw is not None:
                 break
             if self.mu >= o["mu_max"]:
@@ -224,16 +265,26 @@ class IlqrSolver(Solver):
                       + q["lxN"] @ dX[-1])
         # l1 merit weight above the dynamics multipliers s_k + S_k dx_k of the LQ solution
         costates = bw.s + np.einsum("kij,kj->ki", bw.S, dX)
-        self._nu = max(self._nu, 1.5 * float(np.max(np.abs(costates))), 1.0)
+        lam_max = float(np.max(np.abs(costates)))
+        if proj is not None and proj.pinv.shape[2]:
+            # multipliers of the projected rows: D^T lam = -(Q_u + Q_uu du + Q_ux dx)
+            grad = bw.Qu + np.einsum("kij,kj->ki", bw.Quu, dU) + np.einsum(
+                "kij,kj->ki", bw.Qux, dX[:-1])
+            lam = -np.einsum("kum,ku->km", proj.pinv, grad)
+            lam_max = max(lam_max, float(np.max(np.abs(lam))))
+        self._nu = max(self._nu, 1.5 * lam_max, 1.0)
         nu = self._nu
         merit0 = self._merit(ev, nu)
-        deriv = slope - nu * ev["gap_l1"]
+        deriv = slope - nu * (ev["gap_l1"] + ev["eq_l1"])
         t3 = time.perf_counter()
         alpha, best = 1.0, None
         for _ in range(max(1, o["line_search_steps"])):
             Xt = self._retract(self.X, dX, alpha)
             Ut = self.U + alpha * dU
             evt = self._evaluate(Xt, Ut)
+            if evt is not None and not o["line_search"]:
+                best = (Xt, Ut, evt)
+                break
             if evt is not None:
                 mt = self._merit(evt, nu)
                 if mt <= merit0 + 1e-4 * alpha * min(deriv, 0.0) or (

@@ -5,10 +5,11 @@ nodes (Python -> CasADi calls cost ~40 us each, so never one call per node):
 
 * ``values``  (x, u, s, p, x_next) -> (gap, r, c): the dynamics defect
   ``F(x, u) (-) x_next`` in the tangent space, the stacked cost residuals and constraints;
-* ``quadratise`` (x, u, s, p, w_r, w_c, t_c) -> (A, B, lx, lu, lxx, luu, lux): the
-  dynamics Jacobians in the tangent space and the Gauss-Newton model of
+* ``quadratise`` (x, u, s, p, w_r, w_c, t_c) -> (A, B, lx, lu, lxx, luu, lux, cx, cu):
+  the dynamics Jacobians in the tangent space, the Gauss-Newton model of
   ``sum_i w_r,i r_i^2 + sum_j w_c,j (c_j - t_c,j)^2`` (the augmented-Lagrangian rows of
-  the constraints enter through ``w_c``/``t_c``, chosen numerically by the solver).
+  the constraints enter through ``w_c``/``t_c``, chosen numerically by the solver) and the
+  Jacobians of the problem's constraint rows (for the exact equality projection).
 
 Jacobians are taken with respect to ``dx`` in ``x (+) dx`` at ``dx = 0``, so states on a
 manifold (quaternions) are handled in their tangent space.
@@ -54,6 +55,10 @@ class StageModel:
     ncN: int
     values: cs.Function  # mapped over N stage nodes
     quadratise: cs.Function  # mapped over N stage nodes
+    nc_con: int  # rows of the problem's constraints in the stage layout (before the bounds)
+    ncN_con: int  # rows of the problem's constraints in the terminal layout
+    con_reach: np.ndarray  # (nc_con,) rows the input of their node (or of the node before) moves
+    conN_reach: np.ndarray  # (ncN_con,) terminal rows the input of node N-1 moves
     values_term: cs.Function
     quadratise_term: cs.Function
     integrate: cs.Function  # (x, dx) -> x, mapped over N+1 nodes
@@ -93,6 +98,23 @@ def _gn(res, jx, ju, w, t):
         return lx, lxx
     wju = cs.mtimes(cs.diag(w), ju) if res.numel() else ju
     return lx, 2 * cs.mtimes(ju.T, e), lxx, 2 * cs.mtimes(ju.T, wju), 2 * cs.mtimes(ju.T, wjx)
+
+
+def _input_reach(cons, x, u, s, p, x_next, terminal: bool = False) -> np.ndarray:
+    """Rows an input can move in one step (structurally): a row on (x, u) through u, a
+    state-only row through the dynamics ``x_next = F(x, u)`` (relative degree one)."""
+    rows = []
+    for con in cons:
+        if con.uses_input and not terminal:
+            expr = con.function(x, u, s, p)
+        else:
+            expr = con.function(x_next, u, s, p)
+        jac = cs.jacobian(expr, u) if u.numel() else cs.SX(expr.numel(), 0)
+        nnz = np.zeros(expr.numel(), int)
+        row_idx, _ = jac.sparsity().get_triplet()
+        np.add.at(nnz, np.asarray(row_idx, int), 1)
+        rows.append(nnz > 0)
+    return np.concatenate(rows) if rows else np.zeros(0, bool)
 
 
 def _compile(fn: cs.Function, enabled: bool) -> cs.Function:
@@ -147,6 +169,8 @@ def build_stage_model(prb: Problem, codegen: bool = True) -> StageModel:
     c = cs.vertcat(stack(stage_cons, xt, u), xt, u)
     rx, ru = at0(_jac(r, dx)), at0(_jac(r, u))
     cx, cu = at0(_jac(c, dx)), at0(_jac(c, u))
+    nc_con = c.numel() - nx - nu
+    con_reach = _input_reach(stage_cons, x, u, s, p, x_next_nom)
     r0, c0 = at0(r), at0(c)
     nr, nc = r.numel(), c.numel()
     w_r, w_c, t_c = cs.SX.sym("w_r", nr), cs.SX.sym("w_c", nc), cs.SX.sym("t_c", nc)
@@ -160,8 +184,9 @@ def build_stage_model(prb: Problem, codegen: bool = True) -> StageModel:
     quad = cs.Function(
         "ilqr_quadratise", [x, u, s, p, w_r, w_c, t_c],
         [d(A), d(B), d(lx1 + lx2), d(lu1 + lu2), d(lxx1 + lxx2), d(luu1 + luu2),
-         d(lux1 + lux2)],
-        ["x", "u", "s", "p", "w_r", "w_c", "t_c"], ["A", "B", "lx", "lu", "lxx", "luu", "lux"])
+         d(lux1 + lux2), d(cx[:nc_con, :]), d(cu[:nc_con, :])],
+        ["x", "u", "s", "p", "w_r", "w_c", "t_c"],
+        ["A", "B", "lx", "lu", "lxx", "luu", "lux", "cx", "cu"])
 
     # ---- terminal: residuals and constraints on x only (+ state bounds)
     uN = cs.SX(0, 1)
@@ -170,14 +195,16 @@ def build_stage_model(prb: Problem, codegen: bool = True) -> StageModel:
     rNx, cNx = at0(_jac(rN, dx)), at0(_jac(cN, dx))
     rN0, cN0 = at0(rN), at0(cN)
     nrN, ncN = rN.numel(), cN.numel()
+    ncN_con = ncN - nx
+    conN_reach = _input_reach(term_cons, x, u, s, p, x_next_nom, terminal=True)
     w_rN, w_cN, t_cN = cs.SX.sym("w_r", nrN), cs.SX.sym("w_c", ncN), cs.SX.sym("t_c", ncN)
     lxN1, lxxN1 = _gn(rN0, rNx, None, w_rN, cs.DM.zeros(nrN))
     lxN2, lxxN2 = _gn(cN0, cNx, None, w_cN, t_cN)
     values_term = cs.Function("ilqr_values_term", [x, s, p], [rN0, cN0],
                               ["x", "s", "p"], ["r", "c"])
     quad_term = cs.Function("ilqr_quadratise_term", [x, s, p, w_rN, w_cN, t_cN],
-                            [d(lxN1 + lxN2), d(lxxN1 + lxxN2)],
-                            ["x", "s", "p", "w_r", "w_c", "t_c"], ["lx", "lxx"])
+                            [d(lxN1 + lxN2), d(lxxN1 + lxxN2), d(cNx[:ncN_con, :])],
+                            ["x", "s", "p", "w_r", "w_c", "t_c"], ["lx", "lxx", "cx"])
 
     integ, diff = prb.state_integrate(), prb.state_difference()
     log.info("ilqr stage model: nx=%d ndx=%d nu=%d N=%d, %d residual rows, %d constraint rows "
@@ -186,7 +213,8 @@ def build_stage_model(prb: Problem, codegen: bool = True) -> StageModel:
         nx=nx, ndx=ndx, nu=nu, n_nodes=N,
         stage_costs=stage_costs, term_costs=term_costs,
         stage_cons=stage_cons, term_cons=term_cons,
-        nr=nr, nrN=nrN, nc=nc, ncN=ncN,
+        nr=nr, nrN=nrN, nc=nc, ncN=ncN, nc_con=nc_con, ncN_con=ncN_con,
+        con_reach=con_reach, conN_reach=conN_reach,
         values=_compile(values.map(N, "serial"), codegen),
         quadratise=_compile(quad.map(N, "serial"), codegen),
         values_term=_compile(values_term, codegen),
