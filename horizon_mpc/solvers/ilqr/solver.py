@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.problem import Problem
 from horizon_mpc.solvers.base import Solver
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
@@ -35,10 +36,11 @@ __all__ = ["IlqrSolver"]
 log = logging.getLogger(__name__)
 
 
-def _blocks(out, n: int, rows: int, cols: int) -> np.ndarray:
-    """(rows, cols*n) CasADi output -> (n, rows, cols)."""
-    a = np.asarray(out).reshape(rows, n, cols) if cols else np.zeros((rows, n, 0))
-    return a.transpose(1, 0, 2)
+def _blocks(out: np.ndarray, n: int, rows: int, cols: int) -> np.ndarray:
+    """(rows, cols*n) column-major output of a mapped Function -> (n, rows, cols), a view."""
+    if not cols or not rows:
+        return np.zeros((n, rows, cols))
+    return out.T.reshape(n, cols, rows).transpose(0, 2, 1)
 
 
 class IlqrSolver(Solver):
@@ -97,7 +99,14 @@ class IlqrSolver(Solver):
         self._uses_input = np.concatenate(
             [np.full(c.dim, bool(c.uses_input)) for c in m.stage_cons] or [np.zeros(0, bool)])
         self.mu = self.opts["mu_init"]
-        self._difference = prb.state_difference()
+        self._difference = BufferedFunction(prb.state_difference())
+        # numpy in/out through preallocated buffers (no DM conversion); outputs are views
+        # overwritten by the next call of the same function
+        self._values = BufferedFunction(m.values)
+        self._values_term = BufferedFunction(m.values_term)
+        self._quadratise_fn = BufferedFunction(m.quadratise)
+        self._quadratise_term = BufferedFunction(m.quadratise_term)
+        self._integrate = BufferedFunction(m.integrate)
         self.feedback_gains = np.zeros((N, m.nu, m.ndx))
         self.timings: dict[str, float] = {}
 
@@ -161,17 +170,17 @@ class IlqrSolver(Solver):
     def _evaluate(self, X: np.ndarray, U: np.ndarray) -> dict[str, Any] | None:
         """Defects, residuals and constraints at (X, U); None if anything is not finite."""
         m, N = self.model, self.model.n_nodes
-        gap, r, c = m.values(X[:N].T, U.T, self.S, self.P[:, :N], X[1:].T)
-        rN, cN = m.values_term(X[N], self.S, self.P[:, N])
+        gap, r, c = self._values(X[:N].T, U.T, self.S, self.P[:, :N], X[1:].T)
+        rN, cN = self._values_term(X[N], self.S, self.P[:, N])
         ev = {
-            "gap": np.asarray(gap).T,  # (N, ndx)
-            "r": np.asarray(r).T.reshape(N, m.nr),
-            "c": np.asarray(c).T.reshape(N, m.nc),
-            "rN": np.asarray(rN).reshape(1, m.nrN),
-            "cN": np.asarray(cN).reshape(1, m.ncN),
+            "gap": gap.T.copy(),  # (N, ndx)
+            "r": r.T.copy(),  # (N, nr)
+            "c": c.T.copy(),  # (N, nc)
+            "rN": rN.reshape(1, m.nrN).copy(),
+            "cN": cN.reshape(1, m.ncN).copy(),
         }
         if self.x_init is not None:
-            ev["d0"] = np.asarray(self._difference(X[0], self.x_init)).reshape(m.ndx)
+            ev["d0"] = self._difference(X[0], self.x_init)[0].reshape(m.ndx).copy()
         else:
             ev["d0"] = np.zeros(m.ndx)
         if not all(np.all(np.isfinite(v)) for v in ev.values()):
@@ -197,17 +206,17 @@ class IlqrSolver(Solver):
         m, N = self.model, self.model.n_nodes
         wc, tc = self._al.weights_targets(ev["c"])
         wcN, tcN = self._alN.weights_targets(ev["cN"])
-        A, B, lx, lu, lxx, luu, lux, cx, cu = m.quadratise(
+        A, B, lx, lu, lxx, luu, lux, cx, cu = self._quadratise_fn(
             X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T, tc.T)
-        lxN, lxxN, cxN = m.quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
-                                           tcN.T)
+        lxN, lxxN, cxN = self._quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
+                                               tcN.T)
         ndx, nu = m.ndx, m.nu
         q = {
             "A": _blocks(A, N, ndx, ndx), "B": _blocks(B, N, ndx, nu),
-            "lx": np.asarray(lx).T.reshape(N, ndx), "lu": np.asarray(lu).T.reshape(N, nu),
+            "lx": lx.T, "lu": lu.T,
             "lxx": _blocks(lxx, N, ndx, ndx), "luu": _blocks(luu, N, nu, nu),
             "lux": _blocks(lux, N, nu, ndx),
-            "lxN": np.asarray(lxN).reshape(ndx), "lxxN": np.asarray(lxxN).reshape(ndx, ndx),
+            "lxN": lxN.reshape(ndx), "lxxN": lxxN.reshape(ndx, ndx),
         }
         if self._layout.any:
             q["cx"] = _blocks(cx, N, m.nc_con, ndx)
@@ -218,9 +227,7 @@ class IlqrSolver(Solver):
         return q
 
     def _retract(self, X, dX, alpha):
-        m = self.model
-        Xn = np.asarray(m.integrate(X.T, alpha * dX.T)).T
-        return Xn
+        return self._integrate(X.T, alpha * dX.T)[0].T.copy()
 
     # ------------------------------------------------------------------ iterations
     def _iterate(self, ev: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:

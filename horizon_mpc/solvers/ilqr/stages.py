@@ -179,7 +179,7 @@ def build_stage_model(prb: Problem, codegen: bool = True) -> StageModel:
     d = cs.densify
     x_nxt = cs.SX.sym("x_next", nx)
     gap = prb.difference_expr(x_nxt, x_next_nom)  # F(x, u) (-) x_next
-    values = cs.Function("ilqr_values", [x, u, s, p, x_nxt], [gap, r0, c0],
+    values = cs.Function("ilqr_values", [x, u, s, p, x_nxt], [d(gap), d(r0), d(c0)],
                          ["x", "u", "s", "p", "x_next"], ["gap", "r", "c"])
     quad = cs.Function(
         "ilqr_quadratise", [x, u, s, p, w_r, w_c, t_c],
@@ -200,7 +200,7 @@ def build_stage_model(prb: Problem, codegen: bool = True) -> StageModel:
     w_rN, w_cN, t_cN = cs.SX.sym("w_r", nrN), cs.SX.sym("w_c", ncN), cs.SX.sym("t_c", ncN)
     lxN1, lxxN1 = _gn(rN0, rNx, None, w_rN, cs.DM.zeros(nrN))
     lxN2, lxxN2 = _gn(cN0, cNx, None, w_cN, t_cN)
-    values_term = cs.Function("ilqr_values_term", [x, s, p], [rN0, cN0],
+    values_term = cs.Function("ilqr_values_term", [x, s, p], [d(rN0), d(cN0)],
                               ["x", "s", "p"], ["r", "c"])
     quad_term = cs.Function("ilqr_quadratise_term", [x, s, p, w_rN, w_cN, t_cN],
                             [d(lxN1 + lxN2), d(lxxN1 + lxxN2), d(cNx[:ncN_con, :])],
