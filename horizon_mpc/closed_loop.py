@@ -31,7 +31,7 @@ from rclpy.utilities import remove_ros_args
 from horizon_mpc.nodes.mpc_node import MpcNode
 from horizon_mpc.nodes.sim_node import SimNode
 
-__all__ = ["Recording", "Segment", "load_profile", "main", "run"]
+__all__ = ["Push", "Recording", "Segment", "load_profile", "load_pushes", "main", "run"]
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +46,36 @@ class Segment:
     vx: float = 0.0
     vy: float = 0.0
     wz: float = 0.0
+
+
+@dataclass
+class Push:
+    """A world-frame ``force`` (N) on the base for ``duration`` s from sim time ``time``."""
+
+    time: float
+    force: tuple[float, float, float]
+    duration: float = 0.1
+
+
+def load_pushes(path: str | Path) -> list[Push]:
+    """The optional ``pushes:`` list of a profile YAML (``{time, force: [fx, fy, fz],
+    duration}``); empty when the profile has none."""
+    with open(path, encoding="utf-8") as fh:
+        data = yaml.safe_load(fh)
+    items = data.get("pushes", []) if isinstance(data, dict) else []
+    pushes = []
+    for i, item in enumerate(items or []):
+        try:
+            force = tuple(float(f) for f in item["force"])
+            push = Push(float(item["time"]), force, float(item.get("duration", 0.1)))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: push {i} needs time, force [fx, fy, fz] and an optional "
+                             f"duration ({exc})") from None
+        if len(force) != 3 or not push.duration > 0 or not all(map(math.isfinite, force)):
+            raise ValueError(f"{path}: push {i}: force must be 3 finite numbers and the "
+                             "duration positive")
+        pushes.append(push)
+    return pushes
 
 
 def load_profile(path: str | Path) -> list[Segment]:
@@ -107,8 +137,12 @@ class Recording:
 
 def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         duration: float | None = None, mode: str = "lockstep", gif: bool = True,
-        iterations: int = 2, stop_after_fall: float = 1.0) -> Recording:
-    """Run the closed loop; returns the recording (see :func:`summarise` for the metrics)."""
+        iterations: int = 2, stop_after_fall: float = 1.0,
+        pushes: Sequence[Push] = ()) -> Recording:
+    """Run the closed loop; returns the recording (see :func:`summarise` for the metrics).
+
+    ``pushes`` are applied to the simulated base (ground truth, not through ROS).
+    """
     from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen
 
     segments = list(segments or load_profile(DEFAULT_PROFILE))
@@ -144,6 +178,7 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         last_rec_ns, next_frame, fell_at = -1, 0.0, None
         wall0 = time.perf_counter()
         ticks_seen = 0
+        pending = sorted(pushes, key=lambda p: p.time)
         while True:
             executor.spin_once(timeout_sec=0.05)
             now_ns = sim.now_ns
@@ -156,6 +191,10 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
                 continue
             last_rec_ns = now_ns
             t = now_ns / 1e9
+            while pending and t >= pending[0].time - 1e-9:
+                push = pending.pop(0)
+                sim.sim.push(sim.sim.cfg.base_link, push.force, duration=push.duration)
+                log.info("push %s N for %.2f s at t = %.2f s", push.force, push.duration, t)
             st = sim.sim.state()
             cmd_next = command_at(segments, t + dt)  # heard before the next state's tick
             pub_cmd.publish(_twist(cmd_next))
@@ -209,8 +248,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(remove_ros_args(["closed_loop", *argv])[1:])  # tolerate --ros-args
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     segments = load_profile(args.profile)
+    pushes = load_pushes(args.profile)
     log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, args.profile)
-    rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations)
+    rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
+              pushes=pushes)
     summary = summarise(rec, segments, mode=args.mode, robot=args.robot)
     written = write_report(rec, summary, args.out)
     log.info("sim %.2f s in %.1f s wall (real-time factor %.3f); tick median %.1f ms; falls: %d",

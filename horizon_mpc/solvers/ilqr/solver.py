@@ -50,7 +50,8 @@ class IlqrSolver(Solver):
     ``iterations_per_call`` iterations per ``solve()``, no convergence loop);
     ``iterations_per_call``; ``tol`` (stationarity: expected decrease relative to the cost);
     ``tol_constraint`` (defects, constraints, bounds; inf-norm); ``mu_init``/``mu_min``/
-    ``mu_max`` (regularisation); ``rho_init``/``rho_factor``/``rho_max`` (AL penalty);
+    ``mu_max`` (regularisation); ``rho_init``/``rho_factor``/``rho_max`` (AL penalty; fixed
+    at its current value in ``rti`` mode);
     ``line_search_steps`` (number of halvings); ``time_budget`` (s per call, None: none);
     ``codegen`` (compile the node functions); ``callback`` (called with a dict per iteration);
     ``equality``: ``'projection'`` (equality rows handled exactly in the backward pass,
@@ -334,8 +335,12 @@ class IlqrSolver(Solver):
                 info.get("step_norm", 1.0) < 1e-10)
             # multiplier update after every iteration (a primal-dual scheme; waiting for
             # inner convergence costs many more Gauss-Newton iterations)
-            self._al.update(ev["c"], o["rho_factor"], o["rho_max"])
-            self._alN.update(ev["cN"], o["rho_factor"], o["rho_max"])
+            # real-time iterations keep the penalty fixed: the problem moves between calls, so
+            # "not decreasing fast enough" says nothing and the penalty would ratchet up
+            # without bound through the shifts, ruining the conditioning of the steps
+            factor = 1.0 if rti else o["rho_factor"]
+            self._al.update(ev["c"], factor, o["rho_max"])
+            self._alN.update(ev["cN"], factor, o["rho_max"])
             ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
             rec = {"iter": it, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
                    "violation": ev["viol"], **info}
