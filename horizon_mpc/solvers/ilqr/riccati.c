@@ -1,0 +1,597 @@
+/*
+ * Backward Riccati recursion and linear rollout of the multiple-shooting ILQR, in C.
+ *
+ * The same algorithm as horizon_mpc/solvers/ilqr/riccati.py (its docstrings have the maths);
+ * riccati_c.py compiles this file once with plain `gcc -O3 -fPIC -shared` (no -march: the
+ * library may be shared between machines; no -ffast-math: NaN and inf must propagate as they
+ * do in numpy) and calls riccati_backward / riccati_rollout through ctypes.
+ *
+ * Conventions
+ *  - Every matrix is row-major. Inputs are read through element strides, so numpy views
+ *    (e.g. the transposed CasADi buffers of the solver) need no copy: each node's blocks are
+ *    gathered into a small workspace, allocated once per call.
+ *  - One product kernel: C = P, C + P or C - P with P = op(X) Y, op(X)(i, k) = X[i*xi + k*xk]
+ *    (so X Y and X^T Y alike), Y and C row-major: a register tile of 4 rows x 2 vectors whose
+ *    inner loop runs along contiguous rows.
+ *  - Cholesky factors are upper triangular (H = U^T U) and built from the LOWER triangle of H,
+ *    as LAPACK's potrf(lower) behind scipy's cho_factor reads it; a pivot that is not > 0
+ *    (NaN included) is a failure.
+ *  - With a projection, the columns of Z that are exactly zero (the range of D^T) are left
+ *    out of the products: they only add decoupled unit pivots to H.
+ *  - The kernels are compiled twice by including this file into itself: with 2-wide vectors
+ *    for the baseline ISA (SSE2, NEON) and, on x86-64 with gcc, with 4-wide vectors for
+ *    AVX2+FMA; the CPU is asked at run time which one to use.
+ */
+#ifndef RICCATI_KERNEL_PASS
+/* ================================================================== common part */
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* inputs of riccati_backward, in this order */
+enum { IN_A, IN_B, IN_LX, IN_LU, IN_LXX, IN_LUU, IN_LUX, IN_F, IN_LXN, IN_LXXN,
+       IN_PE, IN_PX, IN_Z, IN_FREE, N_IN };
+/* outputs of riccati_backward */
+enum { OUT_K, OUT_KFF, OUT_S, OUT_SV, OUT_QU, OUT_QUU, OUT_QUX, N_OUT };
+/* inputs of riccati_rollout */
+enum { RO_A, RO_B, RO_F, RO_K, RO_KFF, RO_DX0, N_RO };
+
+#define NB 4  /* rows per block of the Cholesky factorisation and solves (= the tile rows) */
+
+/* doubles of workspace of riccati_backward */
+static size_t workspace_size(int ndx, int nu)
+{
+    size_t m = (size_t)ndx + (size_t)nu, x = (size_t)ndx, u = (size_t)nu;
+    return 2 * x * m + 3 * x + m + 4 * u * u + 3 * u * x + 3 * u;
+}
+
+/* element (i, r, c) of input k, through its strides */
+#define EL(k, i, r, c) (in[k] + (ptrdiff_t)(i) * st[3 * (k)] + (ptrdiff_t)(r) * st[3 * (k) + 1] \
+                        + (ptrdiff_t)(c) * st[3 * (k) + 2])
+
+#define RICCATI_KERNEL_PASS 1
+/* ---- baseline ISA: 2-wide vectors */
+#define VW 2
+#define ISA(name) name##_base
+#include __FILE__
+#undef VW
+#undef ISA
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define HAVE_AVX2 1
+/* ---- AVX2 + FMA: 4-wide vectors (a*b + c contracts to fma: -ffp-contract=fast is gcc's
+ * default outside ISO C mode) */
+#pragma GCC push_options
+#pragma GCC target("avx2,fma")
+#define VW 4
+#define ISA(name) name##_avx2
+#include __FILE__
+#undef VW
+#undef ISA
+#pragma GCC pop_options
+#else
+#define HAVE_AVX2 0
+#endif
+
+/* ================================================================== entry points */
+
+/* 1 if this CPU can run the AVX2+FMA kernels (and they were compiled), else 0. */
+int riccati_has_avx2(void)
+{
+#if HAVE_AVX2
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+    return 0;
+#endif
+}
+
+/* variant: 0 automatic, 1 baseline ISA. */
+static int use_avx2(int variant) { return variant != 1 && riccati_has_avx2(); }
+
+/*
+ * Riccati recursion of riccati.py's backward_pass.
+ *  in[N_IN]: A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, P_e, P_x, Z, free (the last four
+ *      are only read at nodes flagged in con); st[3 * N_IN]: element strides of each (node,
+ *      row, column; the 1-D lxN uses the first of its triple, the 2-D lxxN the first two).
+ *  mu: added to the diagonal of every Q_uu.
+ *  con: N flags (node with projected equality rows) or NULL.
+ *  out[N_OUT]: K (N, nu, ndx), k (N, nu), S (N+1, ndx, ndx), s (N+1, ndx), Qu (N, nu),
+ *      Quu (N, nu, nu), Qux (N, nu, ndx), all C-contiguous.
+ *  variant: 0 automatic, 1 baseline ISA.
+ * Returns 0; 1: a (reduced) Q_uu is not positive definite at node *fail_node; 2: k is not
+ * finite at node *fail_node; -1: out of memory.
+ */
+int riccati_backward(int N, int ndx, int nu, const double *const *in, const int64_t *st,
+                     double mu, const uint8_t *con, double *const *out, int variant,
+                     int *fail_node)
+{
+    double *w = malloc(sizeof(double) * (workspace_size(ndx, nu) + 1));
+    int *cols = malloc(sizeof(int) * ((size_t)nu + 1));
+    int ret = -1;
+    *fail_node = -1;
+    if (w && cols) {
+#if HAVE_AVX2
+        if (use_avx2(variant))
+            ret = backward_avx2(N, ndx, nu, in, st, mu, con, out, fail_node, w, cols);
+        else
+#endif
+            ret = backward_base(N, ndx, nu, in, st, mu, con, out, fail_node, w, cols);
+    }
+    free(cols);
+    free(w);
+    return ret;
+}
+
+/*
+ * Linear rollout of riccati.py's linear_rollout.
+ *  in[N_RO]: A, B, f, K, k, dx0; st[3 * N_RO]: their element strides (node, row, column).
+ *  dX (N+1, ndx), dU (N, nu): C-contiguous outputs.
+ * Returns 0, or -1: out of memory.
+ */
+int riccati_rollout(int N, int ndx, int nu, const double *const *in, const int64_t *st,
+                    double *dX, double *dU, int variant)
+{
+    double *w = malloc(sizeof(double) * ((size_t)ndx + 1));
+    if (!w) return -1;
+#if HAVE_AVX2
+    if (use_avx2(variant)) rollout_avx2(N, ndx, nu, in, st, dX, dU, w);
+    else
+#endif
+        rollout_base(N, ndx, nu, in, st, dX, dU, w);
+    free(w);
+    return 0;
+}
+
+#else
+/* ================================================================== kernel pass (per ISA) */
+/* Everything below is compiled once per ISA, with VW doubles per vector; ISA(name) gives
+ * each copy its own names, the short names are macros for readability. */
+#define vec ISA(vec)
+#define vload ISA(vload)
+#define vstore ISA(vstore)
+#define vbc ISA(vbc)
+#define vsum ISA(vsum)
+#define upd ISA(upd)
+#define upd1 ISA(upd1)
+#define gemm ISA(gemm)
+#define axpy ISA(axpy)
+#define scal ISA(scal)
+#define copy ISA(copy)
+#define dot ISA(dot)
+#define matvec ISA(matvec)
+#define get_mat ISA(get_mat)
+#define get_vec ISA(get_vec)
+#define chol_upper ISA(chol_upper)
+#define chol_solve ISA(chol_solve)
+#define chol_solve_vec ISA(chol_solve_vec)
+#define lower_to_upper ISA(lower_to_upper)
+#define backward ISA(backward)
+#define rollout ISA(rollout)
+
+typedef double vec __attribute__((vector_size(8 * VW)));
+
+static inline vec vload(const double *p) { vec v; memcpy(&v, p, sizeof v); return v; }
+static inline void vstore(double *p, vec v) { memcpy(p, &v, sizeof v); }
+#if VW == 4
+static inline vec vbc(double x) { return (vec){x, x, x, x}; }
+static inline double vsum(vec v) { return (v[0] + v[1]) + (v[2] + v[3]); }
+#else
+static inline vec vbc(double x) { return (vec){x, x}; }
+static inline double vsum(vec v) { return v[0] + v[1]; }
+#endif
+static inline vec upd(int acc, vec c, vec p) { return acc > 0 ? c + p : c - p; }
+static inline double upd1(int acc, double c, double p) { return acc > 0 ? c + p : c - p; }
+
+/* C (m x n, ldc) = P, C + P or C - P for acc = 0, 1, -1, where
+ * P(i, j) = sum_k op(X)(i, k) Y(k, j), op(X)(i, k) = X[i*xi + k*xk], Y (kk x n, ldy). */
+__attribute__((noinline))
+static void gemm(int m, int n, int kk, const double *X, ptrdiff_t xi, ptrdiff_t xk,
+                 const double *Y, ptrdiff_t ldy, double *C, ptrdiff_t ldc, int acc)
+{
+    int i = 0;
+    for (; i + 4 <= m; i += 4) {  /* tiles of 4 rows x 2 vectors in registers */
+        const double *x0 = X + i * xi, *x1 = x0 + xi, *x2 = x1 + xi, *x3 = x2 + xi;
+        double *c0 = C + i * ldc, *c1 = c0 + ldc, *c2 = c1 + ldc, *c3 = c2 + ldc;
+        int j = 0;
+        for (; j + 2 * VW <= n; j += 2 * VW) {
+            vec a0 = {0}, a1 = {0}, a2 = {0}, a3 = {0}, b0 = {0}, b1 = {0}, b2 = {0}, b3 = {0};
+            const double *y = Y + j;
+            for (int k = 0; k < kk; k++, y += ldy) {
+                vec ya = vload(y), yb = vload(y + VW), w;
+                w = vbc(x0[k * xk]); a0 += w * ya; b0 += w * yb;
+                w = vbc(x1[k * xk]); a1 += w * ya; b1 += w * yb;
+                w = vbc(x2[k * xk]); a2 += w * ya; b2 += w * yb;
+                w = vbc(x3[k * xk]); a3 += w * ya; b3 += w * yb;
+            }
+            if (acc) {
+                a0 = upd(acc, vload(c0 + j), a0); b0 = upd(acc, vload(c0 + j + VW), b0);
+                a1 = upd(acc, vload(c1 + j), a1); b1 = upd(acc, vload(c1 + j + VW), b1);
+                a2 = upd(acc, vload(c2 + j), a2); b2 = upd(acc, vload(c2 + j + VW), b2);
+                a3 = upd(acc, vload(c3 + j), a3); b3 = upd(acc, vload(c3 + j + VW), b3);
+            }
+            vstore(c0 + j, a0); vstore(c0 + j + VW, b0); vstore(c1 + j, a1);
+            vstore(c1 + j + VW, b1); vstore(c2 + j, a2); vstore(c2 + j + VW, b2);
+            vstore(c3 + j, a3); vstore(c3 + j + VW, b3);
+        }
+        for (; j + VW <= n; j += VW) {
+            vec a0 = {0}, a1 = {0}, a2 = {0}, a3 = {0};
+            const double *y = Y + j;
+            for (int k = 0; k < kk; k++, y += ldy) {
+                vec ya = vload(y);
+                a0 += vbc(x0[k * xk]) * ya; a1 += vbc(x1[k * xk]) * ya;
+                a2 += vbc(x2[k * xk]) * ya; a3 += vbc(x3[k * xk]) * ya;
+            }
+            if (acc) {
+                a0 = upd(acc, vload(c0 + j), a0); a1 = upd(acc, vload(c1 + j), a1);
+                a2 = upd(acc, vload(c2 + j), a2); a3 = upd(acc, vload(c3 + j), a3);
+            }
+            vstore(c0 + j, a0); vstore(c1 + j, a1); vstore(c2 + j, a2); vstore(c3 + j, a3);
+        }
+        for (; j < n; j++) {
+            double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+            const double *y = Y + j;
+            for (int k = 0; k < kk; k++, y += ldy) {
+                s0 += x0[k * xk] * *y; s1 += x1[k * xk] * *y;
+                s2 += x2[k * xk] * *y; s3 += x3[k * xk] * *y;
+            }
+            if (acc) {
+                s0 = upd1(acc, c0[j], s0); s1 = upd1(acc, c1[j], s1);
+                s2 = upd1(acc, c2[j], s2); s3 = upd1(acc, c3[j], s3);
+            }
+            c0[j] = s0; c1[j] = s1; c2[j] = s2; c3[j] = s3;
+        }
+    }
+    for (; i < m; i++) {  /* the last rows, one at a time */
+        const double *x0 = X + i * xi;
+        double *c0 = C + i * ldc;
+        int j = 0;
+        for (; j + 2 * VW <= n; j += 2 * VW) {
+            vec a0 = {0}, b0 = {0};
+            const double *y = Y + j;
+            for (int k = 0; k < kk; k++, y += ldy) {
+                vec w = vbc(x0[k * xk]);
+                a0 += w * vload(y); b0 += w * vload(y + VW);
+            }
+            if (acc) { a0 = upd(acc, vload(c0 + j), a0); b0 = upd(acc, vload(c0 + j + VW), b0); }
+            vstore(c0 + j, a0); vstore(c0 + j + VW, b0);
+        }
+        for (; j + VW <= n; j += VW) {
+            vec a0 = {0};
+            const double *y = Y + j;
+            for (int k = 0; k < kk; k++, y += ldy) a0 += vbc(x0[k * xk]) * vload(y);
+            if (acc) a0 = upd(acc, vload(c0 + j), a0);
+            vstore(c0 + j, a0);
+        }
+        for (; j < n; j++) {
+            double s0 = 0;
+            const double *y = Y + j;
+            for (int k = 0; k < kk; k++, y += ldy) s0 += x0[k * xk] * *y;
+            c0[j] = acc ? upd1(acc, c0[j], s0) : s0;
+        }
+    }
+}
+
+/* y += a x (contiguous) */
+static inline void axpy(int n, double a, const double *x, double *y)
+{
+    vec av = vbc(a);
+    int j = 0;
+    for (; j + VW <= n; j += VW) vstore(y + j, vload(y + j) + av * vload(x + j));
+    for (; j < n; j++) y[j] += a * x[j];
+}
+
+/* y *= a (contiguous) */
+static inline void scal(int n, double a, double *y)
+{
+    vec av = vbc(a);
+    int j = 0;
+    for (; j + VW <= n; j += VW) vstore(y + j, av * vload(y + j));
+    for (; j < n; j++) y[j] *= a;
+}
+
+/* dst = src, n contiguous doubles (short rows: inline, no libc call) */
+static inline void copy(int n, const double *src, double *dst)
+{
+    int j = 0;
+    for (; j + VW <= n; j += VW) vstore(dst + j, vload(src + j));
+    for (; j < n; j++) dst[j] = src[j];
+}
+
+/* sum_p a[p] b[p], contiguous */
+static inline double dot(int n, const double *a, const double *b)
+{
+    vec acc = {0};
+    int p = 0;
+    for (; p + VW <= n; p += VW) acc += vload(a + p) * vload(b + p);
+    double s = vsum(acc);
+    for (; p < n; p++) s += a[p] * b[p];
+    return s;
+}
+
+/* y (rows) = M x, M strided (rs, cs); x, y contiguous */
+static inline void matvec(int rows, int cols, const double *M, ptrdiff_t rs, ptrdiff_t cs,
+                          const double *x, double *y)
+{
+    if (cs == 1) {
+        for (int r = 0; r < rows; r++) y[r] = dot(cols, M + r * rs, x);
+    } else if (rs == 1) {  /* column-major: combine the columns */
+        for (int r = 0; r < rows; r++) y[r] = 0.0;
+        for (int c = 0; c < cols; c++) axpy(rows, x[c], M + c * cs, y);
+    } else {
+        for (int r = 0; r < rows; r++) {
+            double s = 0;
+            for (int c = 0; c < cols; c++) s += M[r * rs + c * cs] * x[c];
+            y[r] = s;
+        }
+    }
+}
+
+/* dst (rows x cols, ld) = src strided (rs, cs) */
+static inline void get_mat(int rows, int cols, const double *src, ptrdiff_t rs, ptrdiff_t cs,
+                           double *dst, ptrdiff_t ld)
+{
+    if (cs == 1) {
+        for (int r = 0; r < rows; r++) copy(cols, src + r * rs, dst + r * ld);
+    } else if (rs == 1) {  /* column-major block (the solver's CasADi buffers) */
+        for (int c = 0; c < cols; c++)
+            for (int r = 0; r < rows; r++) dst[r * ld + c] = src[r + c * cs];
+    } else {
+        for (int r = 0; r < rows; r++)
+            for (int c = 0; c < cols; c++) dst[r * ld + c] = src[r * rs + c * cs];
+    }
+}
+
+/* dst (n) = src strided (s) */
+static inline void get_vec(int n, const double *src, ptrdiff_t s, double *dst)
+{
+    if (s == 1) copy(n, src, dst);
+    else for (int r = 0; r < n; r++) dst[r] = src[r * s];
+}
+
+/* U (n x n): upper triangle = the lower triangle of H (ldh) transposed, zeros below */
+static inline void lower_to_upper(int n, const double *H, ptrdiff_t ldh, double *U)
+{
+    for (int j = 0; j < n; j++) {
+        for (int p = 0; p < j; p++) U[j * n + p] = 0.0;
+        for (int p = j; p < n; p++) U[j * n + p] = H[p * ldh + j];
+    }
+}
+
+/* Upper Cholesky factor (U^T U = H) in place of U, whose upper triangle holds H's (see
+ * lower_to_upper). Left-looking by blocks of NB rows: the bulk of the work is one gemm per
+ * block. Returns 0, or -1 if a pivot is not > 0 (NaN included), as potrf. */
+static int chol_upper(int n, double *U)
+{
+    for (int j0 = 0; j0 < n; j0 += NB) {
+        int j1 = j0 + NB < n ? j0 + NB : n;
+        if (j0) gemm(j1 - j0, n - j0, j0, U + j0, 1, n, U + j0, n, U + j0 * n + j0, n, -1);
+        for (int j = j0; j < j1; j++) {
+            double *uj = U + j * n;
+            for (int p = j0; p < j; p++) axpy(n - j, -U[p * n + j], U + p * n + j, uj + j);
+            double d = uj[j];
+            if (!(d > 0.0)) return -1;
+            d = sqrt(d);
+            uj[j] = d;
+            scal(n - j - 1, 1.0 / d, uj + j + 1);
+        }
+    }
+    return 0;
+}
+
+/* X (n x m, ldx) := H^-1 X with H = U^T U: forward then back substitution by blocks of NB
+ * rows (a gemm with the rows already solved, then a small triangle). */
+static void chol_solve(int n, const double *U, int m, double *X, ptrdiff_t ldx)
+{
+    for (int i0 = 0; i0 < n; i0 += NB) {  /* U^T Y = X */
+        int i1 = i0 + NB < n ? i0 + NB : n;
+        if (i0) gemm(i1 - i0, m, i0, U + i0, 1, n, X, ldx, X + i0 * ldx, ldx, -1);
+        for (int i = i0; i < i1; i++) {
+            double *xi = X + i * ldx;
+            for (int p = i0; p < i; p++) axpy(m, -U[p * n + i], X + p * ldx, xi);
+            scal(m, 1.0 / U[i * n + i], xi);
+        }
+    }
+    for (int i1 = n; i1 > 0; i1 -= NB) {  /* U X = Y, from the last rows up */
+        int i0 = i1 - NB > 0 ? i1 - NB : 0;
+        if (i1 < n)
+            gemm(i1 - i0, m, n - i1, U + i0 * n + i1, n, 1, X + i1 * ldx, ldx, X + i0 * ldx,
+                 ldx, -1);
+        for (int i = i1 - 1; i >= i0; i--) {
+            double *xi = X + i * ldx;
+            for (int p = i + 1; p < i1; p++) axpy(m, -U[i * n + p], X + p * ldx, xi);
+            scal(m, 1.0 / U[i * n + i], xi);
+        }
+    }
+}
+
+/* x (n) := H^-1 x with H = U^T U */
+static void chol_solve_vec(int n, const double *U, double *x)
+{
+    for (int j = 0; j < n; j++) {
+        double v = x[j];
+        for (int p = 0; p < j; p++) v -= U[p * n + j] * x[p];
+        x[j] = v / U[j * n + j];
+    }
+    for (int j = n - 1; j >= 0; j--) {
+        double v = x[j] - dot(n - j - 1, U + j * n + j + 1, x + j + 1);
+        x[j] = v / U[j * n + j];
+    }
+}
+
+/* The recursion (see riccati_backward); w: workspace_size doubles, cols: nu ints. */
+static int backward(int N, int ndx, int nu, const double *const *in, const int64_t *st,
+                    double mu, const uint8_t *con, double *const *out, int *fail_node,
+                    double *w, int *cols)
+{
+    const int m = ndx + nu;
+    double *K = out[OUT_K], *kff = out[OUT_KFF], *S = out[OUT_S], *s = out[OUT_SV];
+    double *Qu_all = out[OUT_QU], *Quu_all = out[OUT_QUU], *Qux_all = out[OUT_QUX];
+    double *AB = w;                 /* ndx x m: [A_i | B_i] */
+    double *SAB = AB + ndx * m;     /* ndx x m: S_{i+1} [A_i | B_i] */
+    double *fi = SAB + ndx * m;     /* ndx: f_i */
+    double *g = fi + ndx;           /* ndx: s_{i+1} + S_{i+1} f_i */
+    double *qx = g + ndx;           /* ndx: Q_x */
+    double *acc = qx + ndx;         /* m: [A | B]^T g, then the terms of s_i - Q_x */
+    double *U = acc + m;            /* nu x nu: Cholesky factor of Q_uu or of H */
+    double *Zc = U + nu * nu;       /* nu x r: the nonzero columns of Z */
+    double *Mz = Zc + nu * nu;      /* r x nu: Zc^T Q_uu */
+    double *H = Mz + nu * nu;       /* r x r: Zc^T Q_uu Zc + diag(1 - free) */
+    double *Px = H + nu * nu;       /* nu x ndx: P_x */
+    double *W = Px + nu * ndx;      /* r x ndx: right-hand side, then solution, for K */
+    double *T = W + nu * ndx;       /* nu x ndx: Q_uu K + Q_ux */
+    double *Pe = T + nu * ndx;      /* nu: P_e */
+    double *wk = Pe + nu;           /* r: right-hand side, then solution, for k */
+    double *v = wk + nu;            /* nu */
+
+    get_mat(ndx, ndx, in[IN_LXXN], st[3 * IN_LXXN], st[3 * IN_LXXN + 1],
+            S + (size_t)N * ndx * ndx, ndx);
+    get_vec(ndx, in[IN_LXN], st[3 * IN_LXN], s + (size_t)N * ndx);
+
+    for (int i = N - 1; i >= 0; i--) {
+        const double *Sn = S + (size_t)(i + 1) * ndx * ndx, *sn = s + (size_t)(i + 1) * ndx;
+        double *Si = S + (size_t)i * ndx * ndx, *si = s + (size_t)i * ndx;
+        double *Ki = K + (size_t)i * nu * ndx, *ki = kff + (size_t)i * nu;
+        double *Qu = Qu_all + (size_t)i * nu, *Quu = Quu_all + (size_t)i * nu * nu;
+        double *Qux = Qux_all + (size_t)i * nu * ndx;
+
+        /* g = s' + S' f; Q_x = l_x + A^T g, Q_u = l_u + B^T g */
+        get_mat(ndx, ndx, EL(IN_A, i, 0, 0), st[3 * IN_A + 1], st[3 * IN_A + 2], AB, m);
+        get_mat(ndx, nu, EL(IN_B, i, 0, 0), st[3 * IN_B + 1], st[3 * IN_B + 2], AB + ndx, m);
+        get_vec(ndx, EL(IN_F, i, 0, 0), st[3 * IN_F + 1], fi);
+        for (int r = 0; r < ndx; r++) g[r] = sn[r] + dot(ndx, Sn + r * ndx, fi);
+        for (int c = 0; c < m; c++) acc[c] = 0.0;
+        for (int r = 0; r < ndx; r++) axpy(m, g[r], AB + r * m, acc);
+        get_vec(ndx, EL(IN_LX, i, 0, 0), st[3 * IN_LX + 1], qx);
+        get_vec(nu, EL(IN_LU, i, 0, 0), st[3 * IN_LU + 1], Qu);
+        for (int r = 0; r < ndx; r++) qx[r] += acc[r];
+        for (int r = 0; r < nu; r++) Qu[r] += acc[ndx + r];
+        /* S' [A B]; Q_xx = l_xx + A^T S' A (into S_i), Q_ux = l_ux + B^T S' A,
+         * Q_uu = l_uu + B^T S' B + mu I */
+        gemm(ndx, m, ndx, Sn, ndx, 1, AB, m, SAB, m, 0);
+        get_mat(ndx, ndx, EL(IN_LXX, i, 0, 0), st[3 * IN_LXX + 1], st[3 * IN_LXX + 2], Si, ndx);
+        gemm(ndx, ndx, ndx, AB, 1, m, SAB, m, Si, ndx, 1);
+        get_mat(nu, ndx, EL(IN_LUX, i, 0, 0), st[3 * IN_LUX + 1], st[3 * IN_LUX + 2], Qux, ndx);
+        gemm(nu, ndx, ndx, AB + ndx, 1, m, SAB, m, Qux, ndx, 1);
+        get_mat(nu, nu, EL(IN_LUU, i, 0, 0), st[3 * IN_LUU + 1], st[3 * IN_LUU + 2], Quu, nu);
+        gemm(nu, nu, ndx, AB + ndx, 1, m, SAB + ndx, m, Quu, nu, 1);
+        for (int r = 0; r < nu; r++) Quu[r * nu + r] += mu;
+
+        if (con && con[i]) {
+            /* du = P_e + P_x dx + Z w. Only the nonzero columns of Z take part: a zero column
+             * j adds the decoupled pivot 1 - free_j to H and nothing to the solution. In
+             * numpy a non-finite Q_uu spreads NaN over all of H (0 * inf), hence the check. */
+            for (int p = 0; p < nu * nu; p++)
+                if (!isfinite(Quu[p])) { *fail_node = i; return 1; }
+            const double *Z = EL(IN_Z, i, 0, 0), *fr = EL(IN_FREE, i, 0, 0);
+            const ptrdiff_t zr = st[3 * IN_Z + 1], zc = st[3 * IN_Z + 2], fs = st[3 * IN_FREE + 1];
+            int r = 0;
+            for (int j = 0; j < nu; j++) {
+                int nonzero = 0;
+                for (int a = 0; a < nu && !nonzero; a++) nonzero = Z[a * zr + j * zc] != 0.0;
+                if (nonzero) cols[r++] = j;
+                else if (!(1.0 - fr[j * fs] > 0.0)) { *fail_node = i; return 1; }
+            }
+            for (int a = 0; a < nu; a++)
+                for (int q = 0; q < r; q++) Zc[a * r + q] = Z[a * zr + cols[q] * zc];
+            get_mat(nu, ndx, EL(IN_PX, i, 0, 0), st[3 * IN_PX + 1], st[3 * IN_PX + 2], Px, ndx);
+            get_vec(nu, EL(IN_PE, i, 0, 0), st[3 * IN_PE + 1], Pe);
+            /* Mz = Zc^T Q_uu; [W | wk] = Mz [P_x | P_e] + Zc^T [Q_ux | Q_u] */
+            gemm(r, nu, nu, Zc, 1, r, Quu, nu, Mz, nu, 0);
+            gemm(r, ndx, nu, Mz, nu, 1, Px, ndx, W, ndx, 0);
+            gemm(r, ndx, nu, Zc, 1, r, Qux, ndx, W, ndx, 1);
+            for (int q = 0; q < r; q++) wk[q] = dot(nu, Mz + q * nu, Pe);
+            for (int q = 0; q < r; q++) v[q] = 0.0;
+            for (int a = 0; a < nu; a++) axpy(r, Qu[a], Zc + a * r, v);
+            for (int q = 0; q < r; q++) wk[q] += v[q];
+            /* H = Mz Zc + diag(1 - free), factored; [W | wk] := H^-1 [W | wk] */
+            gemm(r, r, nu, Mz, nu, 1, Zc, r, H, r, 0);
+            for (int q = 0; q < r; q++) H[q * r + q] += 1.0 - fr[cols[q] * fs];
+            lower_to_upper(r, H, r, U);
+            if (chol_upper(r, U)) { *fail_node = i; return 1; }
+            chol_solve(r, U, ndx, W, ndx);
+            chol_solve_vec(r, U, wk);
+            /* K = P_x - Zc W, k = P_e - Zc wk */
+            gemm(nu, ndx, r, Zc, r, 1, W, ndx, Ki, ndx, 0);
+            for (int p = 0; p < nu * ndx; p++) Ki[p] = Px[p] - Ki[p];
+            for (int a = 0; a < nu; a++) ki[a] = Pe[a] - dot(r, Zc + a * r, wk);
+            /* S_i = Q_xx + K^T (Q_uu K + Q_ux) + Q_ux^T K;
+             * s_i = Q_x + K^T (Q_uu k + Q_u) + Q_ux^T k */
+            copy(nu * ndx, Qux, T);
+            gemm(nu, ndx, nu, Quu, nu, 1, Ki, ndx, T, ndx, 1);
+            gemm(ndx, ndx, nu, Ki, 1, ndx, T, ndx, Si, ndx, 1);
+            gemm(ndx, ndx, nu, Qux, 1, ndx, Ki, ndx, Si, ndx, 1);
+            for (int a = 0; a < nu; a++) v[a] = dot(nu, Quu + a * nu, ki) + Qu[a];
+            for (int c = 0; c < ndx; c++) acc[c] = 0.0;
+            for (int a = 0; a < nu; a++) {
+                axpy(ndx, v[a], Ki + a * ndx, acc);
+                axpy(ndx, ki[a], Qux + a * ndx, acc);
+            }
+        } else {
+            /* K = -Q_uu^-1 Q_ux, k = -Q_uu^-1 Q_u; S_i = Q_xx + Q_ux^T K, s_i = Q_x + Q_ux^T k */
+            lower_to_upper(nu, Quu, nu, U);
+            if (chol_upper(nu, U)) { *fail_node = i; return 1; }
+            for (int p = 0; p < nu * ndx; p++) Ki[p] = -Qux[p];
+            for (int a = 0; a < nu; a++) ki[a] = -Qu[a];
+            chol_solve(nu, U, ndx, Ki, ndx);
+            chol_solve_vec(nu, U, ki);
+            gemm(ndx, ndx, nu, Qux, 1, ndx, Ki, ndx, Si, ndx, 1);
+            for (int c = 0; c < ndx; c++) acc[c] = 0.0;
+            for (int a = 0; a < nu; a++) axpy(ndx, ki[a], Qux + a * ndx, acc);
+        }
+        for (int a = 0; a < nu; a++)
+            if (!isfinite(ki[a])) { *fail_node = i; return 2; }
+        for (int r = 0; r < ndx; r++) si[r] = qx[r] + acc[r];
+        for (int r = 0; r < ndx; r++)  /* S_i = (S_i + S_i^T) / 2 */
+            for (int c = r + 1; c < ndx; c++) {
+                double a = 0.5 * (Si[r * ndx + c] + Si[c * ndx + r]);
+                Si[r * ndx + c] = a;
+                Si[c * ndx + r] = a;
+            }
+    }
+    return 0;
+}
+
+/* The rollout (see riccati_rollout); w: ndx doubles. */
+static void rollout(int N, int ndx, int nu, const double *const *in, const int64_t *st,
+                    double *dX, double *dU, double *w)
+{
+    get_vec(ndx, in[RO_DX0], st[3 * RO_DX0], dX);
+    for (int i = 0; i < N; i++) {
+        const double *x = dX + (size_t)i * ndx;
+        double *u = dU + (size_t)i * nu, *xn = dX + (size_t)(i + 1) * ndx;
+        /* du = k + K dx;  dx' = A dx + B du + f */
+        matvec(nu, ndx, EL(RO_K, i, 0, 0), st[3 * RO_K + 1], st[3 * RO_K + 2], x, u);
+        const double *k = EL(RO_KFF, i, 0, 0);
+        for (int a = 0; a < nu; a++) u[a] += k[a * st[3 * RO_KFF + 1]];
+        matvec(ndx, ndx, EL(RO_A, i, 0, 0), st[3 * RO_A + 1], st[3 * RO_A + 2], x, xn);
+        matvec(ndx, nu, EL(RO_B, i, 0, 0), st[3 * RO_B + 1], st[3 * RO_B + 2], u, w);
+        const double *f = EL(RO_F, i, 0, 0);
+        for (int r = 0; r < ndx; r++) xn[r] = (xn[r] + w[r]) + f[r * st[3 * RO_F + 1]];
+    }
+}
+
+#undef vec
+#undef vload
+#undef vstore
+#undef vbc
+#undef vsum
+#undef upd
+#undef upd1
+#undef gemm
+#undef axpy
+#undef scal
+#undef copy
+#undef dot
+#undef matvec
+#undef get_mat
+#undef get_vec
+#undef chol_upper
+#undef chol_solve
+#undef chol_solve_vec
+#undef lower_to_upper
+#undef backward
+#undef rollout
+#endif

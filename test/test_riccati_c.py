@@ -1,0 +1,245 @@
+"""The compiled Riccati recursion returns what the numpy one does (riccati_c vs riccati).
+
+Problems are random and well conditioned (Q_uu, H eigenvalues in [1, ~5], |A| ~ 1), so both
+implementations agree to rounding: 1e-10 relative to each output's largest entry leaves
+three orders of magnitude of room over the ~1e-15 actually seen. Every parity test runs on
+both compiled kernels (AVX2+FMA where the CPU has it, and the baseline ISA).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from horizon_mpc.solvers.ilqr import riccati_c
+from horizon_mpc.solvers.ilqr.equality import EqualityLayout, Projection, project
+from horizon_mpc.solvers.ilqr.riccati import backward_pass, linear_rollout
+
+RTOL = 1e-10
+FIELDS = ("K", "k", "S", "s", "Qu", "Quu", "Qux")
+
+
+@pytest.fixture(scope="module")
+def compiled(tmp_path_factory):
+    """The library, compiled once into a private cache directory for this module."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("HORIZON_MPC_CACHE_DIR", str(tmp_path_factory.mktemp("riccati_cache")))
+        mp.delenv("HORIZON_MPC_NO_CODEGEN", raising=False)
+        mp.delenv("HORIZON_MPC_RICCATI_ISA", raising=False)
+        riccati_c._forget()
+        if not riccati_c.available():
+            pytest.skip("no C compiler: the compiled recursion is unavailable")
+        yield riccati_c.library_path()
+    riccati_c._forget()
+
+
+@pytest.fixture(params=["auto", "generic"])
+def isa(request, compiled, monkeypatch):
+    """Run the test on the automatic (AVX2 here if supported) and on the baseline kernels."""
+    monkeypatch.setenv("HORIZON_MPC_RICCATI_ISA", request.param)
+    return request.param
+
+
+def _spd(rng, k, n):
+    M = rng.standard_normal((k, n, n)) / np.sqrt(max(n, 1))
+    return M @ np.swapaxes(M, 1, 2) + np.eye(n)
+
+
+def _lq(N=12, ndx=7, nu=5, seed=0):
+    """Random well-conditioned LQ data (A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN)."""
+    rng = np.random.default_rng(seed)
+    return [np.eye(ndx) + 0.1 * rng.standard_normal((N, ndx, ndx)),
+            0.3 * rng.standard_normal((N, ndx, nu)),
+            rng.standard_normal((N, ndx)), rng.standard_normal((N, nu)),
+            _spd(rng, N, ndx), _spd(rng, N, nu), 0.1 * rng.standard_normal((N, nu, ndx)),
+            0.1 * rng.standard_normal((N, ndx)), rng.standard_normal(ndx), _spd(rng, 1, ndx)[0]]
+
+
+def _projection(args, n_rows=4, seed=1):
+    """Projection of random equality rows: input rows at some nodes, state rows of k+1 at
+    others, the terminal rows at N-1; every third node has none."""
+    A, B, f = args[0], args[1], args[7]
+    N, ndx, nu = B.shape
+    rng = np.random.default_rng(seed)
+    own = rng.random((N, n_rows)) < 0.5
+    nxt = (rng.random((N, n_rows)) < 0.3) & ~own
+    own[::3] = nxt[::3] = False
+    nxt[-1] = False
+    layout = EqualityLayout(own, nxt, np.ones(2, bool), np.zeros((N, n_rows)), np.zeros(2))
+    return project(layout, rng.standard_normal((N, n_rows)),
+                   rng.standard_normal((N, n_rows, ndx)), rng.standard_normal((N, n_rows, nu)),
+                   rng.standard_normal(2), rng.standard_normal((2, ndx)), A, B, f)
+
+
+def _column_major_views(args):
+    """The solver's layout: each node's block column-major (a transposed view), no copy."""
+    return [np.ascontiguousarray(np.swapaxes(a, -1, -2)).swapaxes(-1, -2) if a.ndim == 3
+            else np.asfortranarray(a) for a in args]
+
+
+def _assert_same(c, ref):
+    assert c is not None and ref is not None
+    for name in FIELDS:
+        a, b = getattr(c, name), getattr(ref, name)
+        assert a.shape == b.shape, name
+        scale = max(float(np.max(np.abs(b), initial=0.0)), 1e-300)
+        err = float(np.max(np.abs(a - b), initial=0.0))
+        assert err <= RTOL * scale, f"{name}: {err:.2e} vs {scale:.2e}"
+
+
+def test_backward_pass_without_projection_matches_numpy(isa):
+    args = _lq()
+    _assert_same(riccati_c.backward_pass_c(*args, 1e-3), backward_pass(*args, 1e-3))
+
+
+def test_backward_pass_with_projection_matches_numpy(isa):
+    args = _lq(N=15)
+    proj = _projection(args)
+    assert proj.constrained.any() and not proj.constrained.all()
+    _assert_same(riccati_c.backward_pass_c(*args, 1e-6, proj),
+                 backward_pass(*args, 1e-6, proj))
+
+
+@pytest.mark.parametrize("with_projection", [False, True])
+def test_go2_sizes_match_numpy(isa, with_projection):
+    """ndx 36, nu 30: the 4x2-vector tiles, their remainders and blocked Cholesky all run."""
+    args = _lq(N=6, ndx=36, nu=30, seed=3)
+    proj = _projection(args, n_rows=18) if with_projection else None
+    _assert_same(riccati_c.backward_pass_c(*args, 1e-6, proj), backward_pass(*args, 1e-6, proj))
+
+
+def test_transposed_views_are_read_through_their_strides(isa):
+    args = _lq(N=9, ndx=6, nu=4)
+    proj = _projection(args)
+    views = _column_major_views(args)
+    assert not views[0].flags.c_contiguous
+    _assert_same(riccati_c.backward_pass_c(*views, 0.0, proj), backward_pass(*args, 0.0, proj))
+
+
+def _unaligned(a):
+    """A copy of ``a`` in a buffer shifted by 4 bytes (not a valid double pointer for C)."""
+    raw = np.zeros(a.nbytes + 4, np.uint8)
+    out = raw[4:4 + a.nbytes].view(np.float64).reshape(a.shape)
+    out[...] = a
+    return out
+
+
+def test_reversed_unaligned_and_integer_inputs_give_the_same_result(isa):
+    """Negative strides are followed, unaligned or non-float64 arrays are converted."""
+    args = _lq(N=5, ndx=4, nu=3)
+    odd = list(args)
+    odd[0] = np.ascontiguousarray(args[0][:, ::-1])[:, ::-1]  # negative row stride
+    odd[2] = np.ascontiguousarray(args[2][::-1])[::-1]  # nodes backwards
+    odd[4] = _unaligned(args[4])
+    assert not odd[4].flags.aligned
+    odd[9] = np.rint(args[9] * 8).astype(int)  # an integer terminal Hessian
+    ref = list(args)
+    ref[9] = odd[9].astype(float)
+    _assert_same(riccati_c.backward_pass_c(*odd, 1e-6), backward_pass(*ref, 1e-6))
+
+
+def test_fully_constrained_and_dense_null_space_nodes_match_numpy(isa):
+    """A node whose Z is all zero (du = P_e + P_x dx) and one whose Z is a dense rotation
+    with every column free (no zero column to skip)."""
+    args = _lq(N=3, ndx=5, nu=4)
+    rng = np.random.default_rng(5)
+    Z = np.zeros((3, 4, 4))
+    free = np.zeros((3, 4))
+    Z[1] = np.linalg.qr(rng.standard_normal((4, 4)))[0]
+    free[1] = 1.0
+    proj = Projection(rng.standard_normal((3, 4)), rng.standard_normal((3, 4, 5)), Z, free,
+                      np.zeros((3, 4, 0)), np.zeros((3, 0), bool), np.array([True, True, False]),
+                      0)
+    _assert_same(riccati_c.backward_pass_c(*args, 0.0, proj), backward_pass(*args, 0.0, proj))
+
+
+@pytest.mark.parametrize("N, ndx, nu", [(1, 1, 1), (4, 3, 9), (5, 4, 0), (0, 3, 2)])
+def test_edge_sizes_match_numpy(isa, N, ndx, nu):
+    """One state, more inputs than states, no input at all, no node."""
+    args = _lq(N, ndx, nu)
+    _assert_same(riccati_c.backward_pass_c(*args, 1e-6), backward_pass(*args, 1e-6))
+
+
+def test_indefinite_q_uu_returns_none_and_a_larger_mu_succeeds(isa):
+    args = _lq()
+    args[5][4] = -5.0 * np.eye(args[5].shape[1])
+    assert backward_pass(*args, 1e-6) is None
+    assert riccati_c.backward_pass_c(*args, 1e-6) is None
+    _assert_same(riccati_c.backward_pass_c(*args, 1e3), backward_pass(*args, 1e3))
+
+
+def test_indefinite_reduced_hessian_returns_none(isa):
+    args = _lq(N=15)
+    proj = _projection(args)
+    node = int(np.flatnonzero(proj.constrained)[0])
+    args[5][node] = -5.0 * np.eye(args[5].shape[1])
+    assert backward_pass(*args, 1e-6, proj) is None
+    assert riccati_c.backward_pass_c(*args, 1e-6, proj) is None
+
+
+def test_zero_null_space_column_marked_free_is_a_singular_hessian(isa):
+    """diag(1 - free) gives such a column a zero pivot: numpy's Cholesky fails, so does C."""
+    args = _lq(N=3, ndx=5, nu=4)
+    proj = Projection(np.zeros((3, 4)), np.zeros((3, 4, 5)), np.zeros((3, 4, 4)),
+                      np.ones((3, 4)), np.zeros((3, 4, 0)), np.zeros((3, 0), bool),
+                      np.ones(3, bool), 0)
+    assert backward_pass(*args, 0.0, proj) is None
+    assert riccati_c.backward_pass_c(*args, 0.0, proj) is None
+
+
+@pytest.mark.parametrize("with_projection", [False, True])
+def test_nan_input_returns_none(isa, with_projection):
+    args = _lq(N=15)
+    proj = _projection(args) if with_projection else None
+    args[7][8, 2] = np.nan  # a defect: k of node 8 is NaN
+    assert backward_pass(*args, 1e-6, proj) is None
+    assert riccati_c.backward_pass_c(*args, 1e-6, proj) is None
+
+
+def test_linear_rollout_matches_numpy(isa):
+    args = _lq(N=10, ndx=6, nu=4)
+    bw = backward_pass(*args, 1e-6)
+    dx0 = np.linspace(-1.0, 1.0, 6)
+    A, B, f = args[0], args[1], args[7]
+    dX, dU = linear_rollout(A, B, f, bw, dx0)
+    for a, b, fv in ((A, B, f), _column_major_views([A, B, f])):
+        cX, cU = riccati_c.linear_rollout_c(a, b, fv, bw, dx0)
+        assert cX.shape == dX.shape and cU.shape == dU.shape
+        assert np.max(np.abs(cX - dX)) <= RTOL * np.max(np.abs(dX))
+        assert np.max(np.abs(cU - dU)) <= RTOL * np.max(np.abs(dU))
+
+
+def test_wrong_shape_is_refused_before_reaching_c(compiled):
+    args = _lq(N=4, ndx=3, nu=2)
+    args[4] = args[4][:, :2]
+    with pytest.raises(ValueError, match=r"lxx has shape \(4, 2, 3\); expected \(4, 3, 3\)"):
+        riccati_c.backward_pass_c(*args, 0.0)
+
+
+def test_the_cached_library_is_loaded_not_rebuilt(compiled, monkeypatch):
+    assert compiled.is_file()
+
+    def no_build(lib):
+        raise AssertionError("rebuilt a cached library")
+
+    monkeypatch.setattr(riccati_c, "_build", no_build)
+    riccati_c._forget()
+    assert riccati_c.available()
+
+
+def test_unavailable_with_no_codegen_says_why(compiled, monkeypatch, caplog):
+    monkeypatch.setenv("HORIZON_MPC_NO_CODEGEN", "1")
+    with caplog.at_level("INFO", logger=riccati_c.__name__):
+        assert not riccati_c.available()
+    assert "HORIZON_MPC_NO_CODEGEN" in caplog.text
+
+
+def test_unavailable_without_a_compiler_says_why(compiled, monkeypatch, caplog):
+    riccati_c._forget()
+    monkeypatch.setattr(riccati_c.codegen, "CC", "no-such-compiler-xyz")
+    with caplog.at_level("WARNING", logger=riccati_c.__name__):
+        assert not riccati_c.available()
+    assert "no-such-compiler-xyz" in caplog.text
+    with pytest.raises(RuntimeError, match="unavailable"):
+        riccati_c.backward_pass_c(*_lq(N=2, ndx=2, nu=1), 0.0)
+    riccati_c._forget()
