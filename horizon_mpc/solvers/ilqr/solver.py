@@ -26,9 +26,9 @@ import numpy as np
 from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.problem import Problem
 from horizon_mpc.solvers.base import Solver
+from horizon_mpc.solvers.ilqr import riccati, riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
 from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian
-from horizon_mpc.solvers.ilqr.riccati import backward_pass, linear_rollout
 from horizon_mpc.solvers.ilqr.stages import build_stage_model
 
 __all__ = ["IlqrSolver"]
@@ -108,6 +108,11 @@ class IlqrSolver(Solver):
         self._quadratise_fn = BufferedFunction(m.quadratise)
         self._quadratise_term = BufferedFunction(m.quadratise_term)
         self._integrate = BufferedFunction(m.integrate)
+        # the Riccati recursion in compiled C when available (numpy loop otherwise)
+        if self.opts["codegen"] and riccati_c.available():
+            self._backward, self._rollout = riccati_c.backward_pass_c, riccati_c.linear_rollout_c
+        else:
+            self._backward, self._rollout = riccati.backward_pass, riccati.linear_rollout
         self.feedback_gains = np.zeros((N, m.nu, m.ndx))
         self.timings: dict[str, float] = {}
 
@@ -252,7 +257,7 @@ class IlqrSolver(Solver):
             info["rank_deficient_nodes"] = float(proj.rank_deficient)
         # backward pass; raise the regularisation until every Q_uu is positive definite
         while True:
-            bw = backward_pass(q["A"], q["B"], q["lx"], q["lu"], q["lxx"], q["luu"], q["lux"],
+            bw = self._backward(q["A"], q["B"], q["lx"], q["lu"], q["lxx"], q["luu"], q["lux"],
                                ev["gap"], q["lxN"], q["lxxN"], self.mu, proj)
             if bw is not None:
                 break
@@ -266,7 +271,7 @@ class IlqrSolver(Solver):
         else:
             S0 = bw.S[0] + 1e-9 * np.eye(m.ndx)
             dx0 = -np.linalg.solve(S0, bw.s[0])
-        dX, dU = linear_rollout(q["A"], q["B"], ev["gap"], bw, dx0)
+        dX, dU = self._rollout(q["A"], q["B"], ev["gap"], bw, dx0)
         self.feedback_gains = bw.K
         # directional derivative of the model cost along the step; the gaps shrink linearly
         slope = float(np.einsum("ij,ij->", q["lx"], dX[:-1]) + np.einsum("ij,ij->", q["lu"], dU)
