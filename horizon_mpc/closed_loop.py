@@ -137,7 +137,7 @@ class Recording:
 
 def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         duration: float | None = None, mode: str = "lockstep", gif: bool = True,
-        iterations: int = 2, stop_after_fall: float = 1.0,
+        iterations: int = 1, stop_after_fall: float = 1.0,
         pushes: Sequence[Push] = ()) -> Recording:
     """Run the closed loop; returns the recording (see :func:`summarise` for the metrics).
 
@@ -241,15 +241,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     ap.add_argument("--duration", type=float, default=None,
                     help="sim seconds to run (default: the profile's length)")
-    ap.add_argument("--iterations", type=int, default=2, help="ILQR iterations per tick")
+    ap.add_argument("--iterations", type=int, default=1, help="ILQR iterations per tick")
     ap.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
                     help="render a GIF (every 50 ms of sim time)")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = ap.parse_args(remove_ros_args(["closed_loop", *argv])[1:])  # tolerate --ros-args
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    segments = load_profile(args.profile)
-    pushes = load_pushes(args.profile)
-    log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, args.profile)
+    profile = args.profile or DEFAULT_PROFILE  # an empty --profile (launch default) = default
+    segments = load_profile(profile)
+    pushes = load_pushes(profile)
+    log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, profile)
     rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
               pushes=pushes)
     summary = summarise(rec, segments, mode=args.mode, robot=args.robot)
