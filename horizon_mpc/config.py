@@ -14,6 +14,7 @@ Schema (every section but ``robot``/``feet`` is optional and falls back to the d
     nominal_posture: standing  # SRDF group_state giving the nominal joint positions
     nominal_joints: {}         # per-joint overrides (rad), applied on top of the SRDF posture
     friction: 0.6              # friction coefficient used by the controller (linearised cone)
+    foot_radius: 0.0           # m, foot frame to ground contact (the foot rolls on a sphere)
     sim: {kp: 30.0, kd: 1.0, lateral_friction: 0.9, physics_rate: 1000.0}
     mpc: {...}                 # see horizon_mpc.locomotion (gait, weights, horizon)
 """
@@ -53,6 +54,7 @@ class RobotConfig:
     nominal_posture: str | None = "standing"
     nominal_joints: dict[str, float] = field(default_factory=dict)
     friction: float = 0.6
+    foot_radius: float = 0.0
     sim: SimGains = field(default_factory=SimGains)
     sections: dict[str, Any] = field(default_factory=dict)  # other sections, e.g. ``mpc``
     source: Path | None = None
@@ -93,7 +95,17 @@ def _find_config(name_or_path: str | Path) -> Path:
 
 
 _KNOWN = {"robot", "urdf_path", "base_link", "feet", "nominal_posture", "nominal_joints",
-          "friction", "sim"}
+          "friction", "foot_radius", "sim"}
+
+
+def _non_negative(path: Path, key: str, value: Any) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: '{key}' must be a number, got {value!r}") from None
+    if not x >= 0.0:
+        raise ValueError(f"{path}: '{key}' must be >= 0, got {x}")
+    return x
 
 
 def load_robot_config(name_or_path: str | Path) -> RobotConfig:
@@ -126,6 +138,7 @@ def load_robot_config(name_or_path: str | Path) -> RobotConfig:
         nominal_posture=data.get("nominal_posture", "standing"),
         nominal_joints={str(k): float(v) for k, v in (data.get("nominal_joints") or {}).items()},
         friction=float(data.get("friction", 0.6)),
+        foot_radius=_non_negative(path, "foot_radius", data.get("foot_radius", 0.0)),
         sim=SimGains(**{k: float(v) for k, v in sim.items()}),
         sections={k: v for k, v in data.items() if k not in _KNOWN},
         source=path,

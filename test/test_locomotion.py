@@ -103,5 +103,28 @@ def test_walking_problem_converges_to_a_dynamically_consistent_trot():
         st = plan.stance[i, :-1]
         assert np.all(f[2, st] >= -1e-5)
         assert np.all(np.abs(f[0, st]) <= mu * f[2, st] + 1e-5)
+    # stance feet roll without slipping: the contact point p_foot - r e_z is at rest
+    r = mpc.cfg.foot_radius
+    assert r > 0.0  # go2's config declares its sphere feet
+    for k in range(1, plan.a.shape[1]):
+        pin.forwardKinematics(pm, data, plan.q[:, k], plan.v[:, k])
+        pin.updateFramePlacements(pm, data)
+        for i, foot in enumerate(mpc.wp.feet):
+            if plan.stance[i, k]:
+                vel = pin.getFrameVelocity(pm, data, pm.getFrameId(foot),
+                                           pin.LOCAL_WORLD_ALIGNED)
+                contact = vel.linear + np.cross(vel.angular, [0.0, 0.0, -r])
+                assert np.linalg.norm(contact) < 1e-5, (k, foot, contact)
     # the plan moves forward
     assert plan.q[0, -1] > 0.05
+
+
+def test_foot_radius_must_be_a_non_negative_number(tmp_path):
+    from horizon_mpc.config import load_robot_config
+
+    path = tmp_path / "bot.yaml"
+    path.write_text("robot: go2\nfeet: [FL_foot]\nfoot_radius: -0.01\n")
+    with pytest.raises(ValueError, match="foot_radius"):
+        load_robot_config(path)
+    path.write_text("robot: go2\nfeet: [FL_foot]\n")
+    assert load_robot_config(path).foot_radius == 0.0

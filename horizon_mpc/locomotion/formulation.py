@@ -73,10 +73,13 @@ class ContactTerms:
 
 def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q, v, f, mu: float,
                  clearance: str | None = "constraint", clearance_weight: float = 1e3,
-                 ) -> ContactTerms:
+                 foot_radius: float = 0.0) -> ContactTerms:
     """Contact constraints of each foot, to be switched per node by a schedule.
 
-    Stance (node k): foot velocity zero (world axes, 3 rows); force inside the linearised
+    Stance (node k): velocity of the contact point zero (world axes, 3 rows): with
+    ``foot_radius`` r > 0 the foot is a sphere of radius r around the foot frame that rolls
+    on the ground, and the contact point ``p_foot - r e_z`` (not the frame) is at rest, i.e.
+    ``v_foot + omega_foot x (-r e_z) = 0``; force inside the linearised
     friction cone ``|f_x|, |f_y| <= mu f_z`` and ``f_z >= 0`` (5 rows, stage nodes).
     Swing: force zero (3 rows); clearance: the foot height follows the parameter
     ``swing_z`` (a constraint, a cost of weight ``clearance_weight``, or None).
@@ -91,7 +94,9 @@ def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q, v, f, mu: 
                      [0.0, 0.0, 1.0]])
     for i, foot in enumerate(feet):
         fi = f[3 * i:3 * i + 3]
-        lin, _ = model.frame_velocity(foot, ref="LOCAL_WORLD_ALIGNED")(q, v)
+        lin, ang = model.frame_velocity(foot, ref="LOCAL_WORLD_ALIGNED")(q, v)
+        if foot_radius > 0.0:
+            lin = lin + cs.cross(ang, cs.DM([0.0, 0.0, -foot_radius]))
         terms.velocity[foot] = prb.create_constraint(f"{foot}_velocity", lin)
         terms.friction[foot] = prb.create_constraint(
             f"{foot}_friction", cs.mtimes(cs.DM(cone), fi), bounds=(0.0, np.inf))

@@ -26,15 +26,18 @@ class GaitSettings:
 class Weights:
     """Cost weights (per residual row where a list is given)."""
 
-    base_linear_velocity: list[float] = field(default_factory=lambda: [20.0, 20.0, 10.0])
+    # lateral stepping needs a stronger pull than forward trotting to reach the command
+    base_linear_velocity: list[float] = field(default_factory=lambda: [40.0, 100.0, 10.0])
     base_angular_velocity: list[float] = field(default_factory=lambda: [2.0, 2.0, 10.0])
     base_height: float = 100.0
     base_orientation: float = 100.0
-    base_position: float = 2.0
+    # the position reference integrates the command: a strong pull on it is the integral
+    # action that removes the steady-state velocity error of the real robot
+    base_position: float = 50.0
     base_yaw: float = 5.0
-    posture: float = 1.0
-    joint_velocity: float = 0.05
-    acceleration: float = 1e-3
+    posture: float = 0.3
+    joint_velocity: float = 0.01
+    acceleration: float = 3e-4
     force: float = 1e-5
     swing_height: float = 500.0
     final_posture: float = 5.0

@@ -106,7 +106,8 @@ def build_walking_problem(model: RobotModel, cfg: RobotConfig,
         add_torque_limits(prb, model, tau[6:])
     contacts = add_contacts(prb, model, feet, q, v, f, mu,
                             clearance=None if st.clearance == "none" else st.clearance,
-                            clearance_weight=st.weights.swing_height)
+                            clearance_weight=st.weights.swing_height,
+                            foot_radius=cfg.foot_radius)
     # joint limits from the URDF
     q_lo, q_hi = model.q_lower.copy(), model.q_upper.copy()
     q.set_bounds(q_lo, q_hi)

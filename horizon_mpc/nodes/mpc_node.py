@@ -151,7 +151,7 @@ class MpcNode(Node):
         d = self._declare
         d("control_rate", 1.0 / st.dt, "MPC ticks per second of the node clock (trigger timer)",
           _range(1, 1000), ro=True)
-        d("iterations", 2, "ILQR iterations per tick", irng=[IntegerRange(
+        d("iterations", 1, "ILQR iterations per tick", irng=[IntegerRange(
             from_value=1, to_value=50, step=1)], ro=True)
         d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
           "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)
