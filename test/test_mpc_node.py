@@ -311,3 +311,56 @@ def test_sigterm_exits_cleanly_with_code_0():
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_the_executable_follows_the_sim_clock_unless_told_otherwise():
+    from horizon_mpc.nodes.mpc_node import with_sim_time_default
+
+    assert with_sim_time_default(["mpc_node"])[-3:] == ["--ros-args", "-p",
+                                                        "use_sim_time:=true"]
+    user = ["mpc_node", "--ros-args", "-p", "use_sim_time:=false"]
+    assert with_sim_time_default(user) == user
+
+
+@pytest.mark.slow
+def test_sim_node_and_mpc_node_started_without_arguments_work_together():
+    """Two processes, no arguments: the MPC plans on the simulator's states (real time)."""
+    from trajectory_msgs.msg import JointTrajectory
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path),
+           "ROS_DOMAIN_ID": str(60 + os.getpid() % 40)}
+    procs = [subprocess.Popen([sys.executable, "-m", f"horizon_mpc.nodes.{name}"], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+             for name in ("sim_node", "mpc_node")]
+    old = os.environ.get("ROS_DOMAIN_ID")
+    os.environ["ROS_DOMAIN_ID"] = env["ROS_DOMAIN_ID"]
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        node = rclpy.create_node("listener", context=ctx)
+        got: list[JointTrajectory] = []
+        node.create_subscription(JointTrajectory, "joint_trajectory", got.append, 10)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        deadline = time.monotonic() + 120.0
+        while len(got) < 5 and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.5)
+            assert all(p.poll() is None for p in procs), "a node exited"
+        ex.shutdown()
+        assert len(got) >= 5, "no trajectories from mpc_node within 120 s"
+        assert all(len(m.points) > 0 and len(m.joint_names) == 12 for m in got)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+        if old is None:
+            os.environ.pop("ROS_DOMAIN_ID", None)
+        else:
+            os.environ["ROS_DOMAIN_ID"] = old
+        for p in procs:
+            p.send_signal(signal.SIGTERM)
+        for p in procs:
+            try:
+                assert p.wait(timeout=20) == 0
+            finally:
+                if p.poll() is None:
+                    p.kill()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import time
 from collections.abc import Sequence
 
@@ -416,9 +417,25 @@ class MpcNode(Node):
         self._pub_diag.publish(msg)
 
 
+def with_sim_time_default(argv: Sequence[str]) -> list[str]:
+    """``argv`` with ``use_sim_time:=true`` added unless the user set ``use_sim_time``.
+
+    The executables' defaults work together: ``sim_node`` stamps states with the simulated
+    clock it publishes on ``/clock``, so ``mpc_node`` started with no arguments follows that
+    clock. On a robot, pass ``--ros-args -p use_sim_time:=false``.
+    """
+    argv = list(argv)
+    if any("use_sim_time" in a for a in argv):
+        return argv
+    return [*argv, "--ros-args", "-p", "use_sim_time:=true"]
+
+
 def main(args: Sequence[str] | None = None) -> int:
-    """Entry point of ``ros2 run horizon_mpc mpc_node``; exit code 0 on SIGINT/SIGTERM."""
-    return spin_until_signal(MpcNode, args)
+    """Entry point of ``ros2 run horizon_mpc mpc_node``; exit code 0 on SIGINT/SIGTERM.
+
+    ``use_sim_time`` defaults to true here (see :func:`with_sim_time_default`).
+    """
+    return spin_until_signal(MpcNode, with_sim_time_default(sys.argv if args is None else args))
 
 
 if __name__ == "__main__":
