@@ -1,0 +1,110 @@
+"""The closed-loop benchmark (``bench/bench_closed_loop.py``) runs and writes well-formed JSON.
+
+Tiny configuration: go2, lockstep, 2.2 s of sim time (the forward segment gets 0.2 s of
+tracking samples after its 1 s of settling), no GIF, in this process. What is
+checked is the plumbing (keys, finite figures, the breakdown adding up), not the figures.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load_bench():
+    spec = importlib.util.spec_from_file_location("bench_closed_loop",
+                                                  ROOT / "bench" / "bench_closed_loop.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+bench = _load_bench()
+
+
+def _finite(x) -> bool:
+    return isinstance(x, int | float) and math.isfinite(x)
+
+
+def _strict(path: Path) -> dict:
+    return json.loads(path.read_text(),
+                      parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
+
+
+def test_the_profile_is_the_documented_one():
+    assert [(s.duration, s.vx, s.vy, s.wz) for s in bench.profile("go2")] == [
+        (1.0, 0.0, 0.0, 0.0), (4.0, 0.3, 0.0, 0.0), (2.0, 0.0, 0.2, 0.0),
+        (2.0, 0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0)]
+    assert bench.profile("solo12")[1].vx == bench.profile("anymal_c")[1].vx == 0.2
+
+
+def test_the_probes_are_removed_after_a_run():
+    from horizon_mpc.mpc.controller import WalkingMpc
+    from horizon_mpc.nodes.mpc_node import MpcNode
+
+    before = (MpcNode.tick, MpcNode.__init__, WalkingMpc.update)
+    with bench.Probe().installed():
+        assert MpcNode.tick is not before[0]
+    assert (MpcNode.tick, MpcNode.__init__, WalkingMpc.update) == before
+
+
+def test_a_tiny_lockstep_run_gives_finite_figures(tmp_path):
+    args = bench.parse_args(["--robots", "go2", "--mode", "lockstep", "--duration", "2.2",
+                             "--no-gif", "--no-isolate", "--out", str(tmp_path / "cl")])
+    assert not args.reference  # lockstep runs are their own reference
+    assert bench.plan_runs(args) == [("go2", "go2", "lockstep", False)]
+    summary = bench.measure("go2", "lockstep", 2.2, gif=False, out=tmp_path / "cl" / "go2")
+    written = {p.name for p in (tmp_path / "cl" / "go2").iterdir()}
+    assert {"summary.json", "velocity_tracking.png", "tick_breakdown.png",
+            "ticks.csv"} <= written
+    assert "run.gif" not in written
+    on_disk = _strict(tmp_path / "cl" / "go2" / "summary.json")
+    ticks = on_disk["bench"]["ticks"]
+    assert ticks["n"] >= 100  # 2.2 s at 50 Hz, less the bootstrap tick
+    for key in ("median", "p95", "p99", "max"):
+        assert _finite(ticks["tick_ms"][key]) and ticks["tick_ms"][key] > 0
+    b = ticks["breakdown_ms_mean"]
+    assert set(bench.PHASES) | set(bench.ILQR_PARTS) | set(bench.SUB_PARTS) <= set(b)
+    assert all(_finite(v) for v in b.values())
+    assert b["ilqr"] > 0 and b["backward"] > 0 and b["quadratise"] > 0
+    # the phases add up to the mean tick, less the message conversions outside the tick
+    total = sum(b[k] for k in bench.PHASES)
+    assert total == pytest.approx(ticks["tick_ms"]["mean"] + b["state"]
+                                  - ticks["state_in_tick_ms_mean"], rel=1e-6)
+    assert ticks["iterations_per_tick"] == 1
+    assert ticks["control_periods"]["rate_hz"] == pytest.approx(50, rel=0.1)
+    assert ticks["state_lag_ms"]["max"] == 0  # lockstep: the sim waits for every plan
+    assert 0 <= ticks["deadline_misses"]["percent"] <= 100
+    assert on_disk["bench"]["memory_mb"]["peak"] > 50
+    assert all(_finite(v) for v in on_disk["bench"]["wall_s_per_sim_s"].values())
+    assert on_disk["falls"]["count"] == 0
+
+    croc = bench.crocoddyl_reference()
+    assert croc["same_run"] is False
+    agg = bench.bench_ilqr.jsonable(bench.aggregate({"go2": summary}, croc, args, {}))
+    path = tmp_path / "closed_loop.json"
+    path.write_text(json.dumps(agg, allow_nan=False))
+    agg = _strict(path)
+    assert set(agg) >= {"code", "machine", "settings", "crocoddyl", "targets", "runs", "status"}
+    run = agg["runs"]["go2"]
+    assert {"tick_ms", "deadline_misses", "real_time_factor", "breakdown_ms_mean",
+            "tracking_rmse_pooled", "segments", "falls", "memory_mb", "load"} <= set(run)
+    assert _finite(run["real_time_factor"]) and run["real_time_factor"] > 0
+    assert _finite(run["tracking_rmse_pooled"]["vx"])
+    assert run["segments"][1]["samples"] > 0 and run["segments"][2]["rmse"] is None
+    assert "over_crocoddyl_iteration" in agg["status"]["go2"]["median_tick_ms"]
+    assert set(agg["status"]["go2"]) >= {"median_tick_ms", "p99_over_median", "rss_mb",
+                                        "tracking_rmse_max", "real_time_factor",
+                                        "deadline_miss_percent"}
+    text = bench.table(agg)
+    assert "go2" in text and "Crocoddyl" in text
+    bench.plot_aggregate(agg, tmp_path / "closed_loop.png")
+    assert (tmp_path / "closed_loop.png").stat().st_size > 0
