@@ -29,6 +29,7 @@ EXECUTABLES = {
     "mpc_node": "horizon_mpc.nodes.mpc_node:main",
     "sim_node": "horizon_mpc.nodes.sim_node:main",
     "closed_loop": "horizon_mpc.closed_loop:main",
+    "motion": "horizon_mpc.motions.cli:main",
 }
 
 INSTALL_REQUIRES = [
@@ -76,6 +77,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/config/motions", sorted(glob("config/motions/*.yaml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.py") + glob("launch/*.xml")
                                            + glob("launch/*.yaml"))),
         (f"lib/{PACKAGE}", [f"scripts/{name}" for name in EXECUTABLES]),

@@ -1,0 +1,110 @@
+"""``motion``: solve one of the paper's three motions offline and write its outputs.
+
+    ros2 run horizon_mpc motion leap [--robot go2] [--solver ipopt] [--out out/motions/leap]
+    python -m horizon_mpc.motions turn --robot centauro
+    motion walk --solver gnsqp --set duration=1.0
+
+Settings come from ``config/motions/<motion>.yaml`` (per robot), ``--set KEY=VALUE``
+overrides one (the value is read as YAML: ``--set velocity=[0.2,0,0]``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import logging
+import sys
+import time
+from collections.abc import Sequence
+
+import yaml
+
+__all__ = ["MOTIONS", "main"]
+
+MOTIONS = ("leap", "turn", "walk")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="motion", description="Solve a motion of the Horizon paper offline (leap, turn, "
+        "walk) and write its solution, plots, animation and summary.")
+    p.add_argument("motion", choices=MOTIONS)
+    p.add_argument("--robot", help="robot config name or YAML path (default: the motion's)")
+    p.add_argument("--solver", choices=("ipopt", "gnsqp", "ilqr"),
+                   help="solver (default: the motion's: ipopt for leap/turn, ilqr for walk)")
+    p.add_argument("--out", help="output folder (default: out/motions/<motion>)")
+    p.add_argument("--config", help="motion config YAML (default: config/motions/<motion>.yaml)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one setting (repeatable)")
+    p.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    p.add_argument("--no-replay", action="store_true",
+                   help="leap: skip the open-loop PyBullet replay")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return p
+
+
+def _overrides(items: Sequence[str]) -> dict:
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise SystemExit(f"--set expects KEY=VALUE, got {item!r}")
+        out[key.strip()] = yaml.safe_load(value)
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``motion`` executable; returns the process exit code
+    (0: solved and written; 1: the solver did not succeed, outputs written anyway)."""
+    args = _parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.motions import leap, turn, walk
+    from horizon_mpc.motions.output import write_outputs
+    from horizon_mpc.motions.settings import load_motion_config
+    from horizon_mpc.motions.wholebody import robot_model
+
+    mc = load_motion_config(args.config or args.motion)
+    robot = args.robot or mc.robot
+    solver = args.solver or mc.solver
+    cfg = load_robot_config(robot)
+    cls, run = {
+        "leap": (leap.LeapSettings, leap.run_leap),
+        "turn": (turn.TurnSettings, turn.run_turn),
+        "walk": (walk.WalkSettings, walk.run_walk),
+    }[args.motion]
+    settings = mc.settings_for(cls, cfg.name, _overrides(args.set))
+    model = robot_model(cfg, getattr(settings, "locked_joints", ()))
+    print(f"{args.motion}: {cfg.name} ({model.nv} dof), solver {solver}")
+    t0 = time.perf_counter()
+    res = run(cfg, solver, settings, model=model)
+    wall = time.perf_counter() - t0
+    extra = {"settings": dataclasses.asdict(settings), "wall_time": wall}
+    if args.motion == "leap" and not args.no_replay:
+        from horizon_mpc.motions.replay import replay
+
+        rep = replay(res, cfg, model.pin_model, settings.replay_kp, settings.replay_kd)
+        target = res.summary["target"][0] - res.q[0, 0]
+        extra["pybullet_replay"] = {
+            "kp": settings.replay_kp, "kd": settings.replay_kd,
+            "displacement": rep.displacement.tolist(), "target_displacement": target,
+            "landing_error": float(abs(rep.displacement[0] - target)),
+            "final_roll_pitch_yaw": rep.final_rpy.tolist(), "max_tilt": rep.max_tilt}
+    out = args.out or f"out/motions/{args.motion}"
+    render = {"yaw": 90.0} if args.motion == "leap" else {}
+    files = write_outputs(res, cfg, out, effort_limit=model.joint_effort_limit,
+                          animation=not args.no_animation, extra=extra, **render)
+    ok = bool(res.stats.get("success", True))
+    print(f"{args.motion}: {'solved' if ok else 'NOT solved'} in {wall:.1f} s; "
+          f"outputs in {out}: {', '.join(p.name for p in files.values())}")
+    for key, value in res.summary.items():
+        if not isinstance(value, list) or len(value) <= 4:
+            print(f"  {key}: {value}")
+    if "pybullet_replay" in extra:
+        print(f"  pybullet_replay: {extra['pybullet_replay']}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,201 @@
+"""The leap (the paper's Spot leap, here on an example-robot-data quadruped).
+
+Finite horizon, multiple shooting, IPOPT. Contact timeline: all four feet down; the front
+feet lift and the hind legs push; flight; the front feet land first, then the hind feet.
+Final constraints: base position ``p_des`` (``distance`` ahead of the start, same height),
+base orientation and joints as at the start, velocity zero.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from horizon_mpc.config import RobotConfig, load_robot_config
+from horizon_mpc.locomotion import ContactSchedule
+from horizon_mpc.model import RobotModel
+from horizon_mpc.motions.analysis import dynamics_check, flight_phases, loaded
+from horizon_mpc.motions.result import MotionResult
+from horizon_mpc.motions.schedule import timeline_schedule
+from horizon_mpc.motions.wholebody import (
+    WholeBodyProblem,
+    build_whole_body,
+    final_state_errors,
+    quaternion_error,
+    robot_model,
+)
+from horizon_mpc.posture import standing_configuration
+
+__all__ = ["LeapProblem", "LeapSettings", "build_leap", "leap_schedule", "leap_summary",
+           "run_leap"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class LeapSettings:
+    """Timeline (s), target and weights of the leap (``config/motions/leap.yaml``)."""
+
+    dt: float = 0.02
+    stand: float = 0.2  # all feet down before the leap
+    push: float = 0.25  # front feet up, hind legs pushing
+    flight: float = 0.15  # all feet in the air
+    land: float = 0.15  # front feet down, hind feet still in the air
+    settle: float = 0.45  # all feet down until the end
+    distance: float = 0.4  # forward displacement of the base (m)
+    swing_floor: float = 0.08  # mid-swing height (m) the swinging feet must stay above
+    friction: float | None = None  # None: the robot config's
+    foot_radius: float | None = None  # ball feet (m); None: the robot config's
+    locked_joints: list[str] = field(default_factory=list)  # held at the nominal posture
+    torque_limit_scale: float = 0.8  # fraction of the URDF effort limits the plan may use
+    replay_kp: float = 100.0  # joint PD gains of the open-loop PyBullet replay
+    replay_kd: float = 3.0
+    w_posture: float = 1.0
+    w_pitch: float = 10.0  # the leap pitches the base: a light cost
+    w_roll_yaw: float = 1000.0  # it should neither roll nor turn
+    w_lateral: float = 10.0
+    w_velocity: float = 0.1
+    w_acceleration: float = 1e-3
+    w_force: float = 1e-4
+    w_torque: float = 1e-3
+
+    @property
+    def duration(self) -> float:
+        """Total duration (s)."""
+        return self.stand + self.push + self.flight + self.land + self.settle
+
+    @property
+    def n_nodes(self) -> int:
+        """Number of intervals of the horizon."""
+        return int(round(self.duration / self.dt))
+
+
+@dataclass
+class LeapProblem:
+    """The leap's whole-body problem and its targets."""
+
+    wb: WholeBodyProblem
+    settings: LeapSettings
+    p_des: np.ndarray  # (3,) final base position (m)
+    front: list[int]  # indices of the front feet in ``wb.feet``
+    hind: list[int]
+
+
+def leap_schedule(st: LeapSettings, front: list[int], hind: list[int]) -> ContactSchedule:
+    """Front feet in the air from ``stand`` to ``stand+push+flight``; hind feet from
+    ``stand+push`` to ``stand+push+flight+land``."""
+    t_front_up = st.stand
+    t_hind_up = st.stand + st.push
+    t_front_down = t_hind_up + st.flight
+    t_hind_down = t_front_down + st.land
+    swings: list[list[tuple[float, float]]] = [[] for _ in range(len(front) + len(hind))]
+    for i in front:
+        swings[i] = [(t_front_up, t_front_down)]
+    for i in hind:
+        swings[i] = [(t_hind_up, t_hind_down)]
+    return timeline_schedule(swings, st.n_nodes, st.dt, st.swing_floor)
+
+
+def front_and_hind(model: RobotModel, feet: list[str], q0: np.ndarray) -> tuple[list[int],
+                                                                                list[int]]:
+    """Split the feet by their x position in the base frame at ``q0`` (front: x > 0)."""
+    x = np.array([float(model.fk(foot)(q0)[0][0]) for foot in feet]) - q0[0]
+    front = [i for i in range(len(feet)) if x[i] > 0]
+    hind = [i for i in range(len(feet)) if x[i] <= 0]
+    if not front or not hind:
+        raise ValueError(f"cannot tell front from hind feet: x = {x.round(3).tolist()}")
+    return front, hind
+
+
+def build_leap(model: RobotModel, cfg: RobotConfig, st: LeapSettings) -> LeapProblem:
+    """The leap problem for ``model`` standing at its nominal posture (``cfg``)."""
+    _, q0 = standing_configuration(cfg, model.pin_model)
+    feet = list(cfg.feet)
+    front, hind = front_and_hind(model, feet, q0)
+    mu = cfg.friction if st.friction is None else st.friction
+    wb = build_whole_body(model, feet, st.n_nodes, st.dt, q0, mu, clearance=None,
+                          torque_limit_scale=st.torque_limit_scale,
+                          foot_radius=cfg.foot_radius if st.foot_radius is None
+                          else st.foot_radius)
+    prb, q, v, a, f = wb.prb, wb.q, wb.v, wb.a, wb.f
+    p_des = q0[:3] + np.array([st.distance, 0.0, 0.0])
+    q_final = q0.copy()
+    q_final[:3] = p_des
+    wb.add_final_state(q_final)
+    sched = leap_schedule(st, front, hind)
+    wb.set_schedule(sched, floor=True)
+
+    diff = model.difference()(q0, q)
+
+    prb.create_cost("posture", diff[6:], weight=st.w_posture)
+    prb.create_cost("base_orientation", quaternion_error(q[3:7], q0[3:7]),
+                    weight=[st.w_roll_yaw, st.w_pitch, st.w_roll_yaw])
+    prb.create_cost("lateral", q[1] - q0[1], weight=st.w_lateral)
+    prb.create_cost("velocity", v, weight=st.w_velocity)
+    prb.create_cost("acceleration", a, weight=st.w_acceleration)
+    prb.create_cost("forces", f, weight=st.w_force)
+    prb.create_cost("torques", wb.tau[6:], weight=st.w_torque)
+
+    # initial guess: the standing posture carried from the start to the target at constant
+    # speed, the weight shared by the feet in stance
+    s = np.linspace(0.0, 1.0, st.n_nodes + 1)
+    qg = np.repeat(q0[:, None], st.n_nodes + 1, axis=1)
+    qg[:3] += np.outer(p_des - q0[:3], s)
+    wb.guess(qg, sched.stance)
+    log.info("leap: %s, N=%d, dt=%.3f s, target %s", model.name, st.n_nodes, st.dt,
+             np.round(p_des, 3).tolist())
+    return LeapProblem(wb, st, p_des, front, hind)
+
+
+def leap_summary(res: MotionResult, lp: LeapProblem, model: RobotModel) -> dict:
+    """The leap's figures: final errors, phases read from the forces, torque use, dynamics.
+
+    Times in s, distances in m, angles in deg. ``hind_lift_off`` / ``front_lift_off``: end
+    of the last loaded interval of each foot before the first flight; ``front_touchdown`` /
+    ``hind_touchdown``: start of its first loaded interval after it.
+    """
+    st = lp.settings
+    q_final = lp.wb.q0.copy()
+    q_final[:3] = lp.p_des
+    out = {"target": lp.p_des.tolist(), "distance": st.distance,
+           **final_state_errors(model, res, q_final)}
+    load = loaded(res)
+    flights = flight_phases(load)
+    out["flight_phases"] = [[a * res.dt, b * res.dt] for a, b in flights]
+    if flights:
+        k0, k1 = flights[0]
+
+        def last_before(i: int) -> float | None:
+            idx = np.flatnonzero(load[i, :k0])
+            return float((idx[-1] + 1) * res.dt) if idx.size else None
+
+        def first_after(i: int) -> float | None:
+            idx = np.flatnonzero(load[i, k1:])
+            return float((k1 + idx[0]) * res.dt) if idx.size else None
+
+        out["front_lift_off"] = [last_before(i) for i in lp.front]
+        out["hind_lift_off"] = [last_before(i) for i in lp.hind]
+        out["front_touchdown"] = [first_after(i) for i in lp.front]
+        out["hind_touchdown"] = [first_after(i) for i in lp.hind]
+    limit = model.joint_effort_limit
+    out["max_torque_ratio"] = float(np.max(np.abs(res.tau[6:]) / limit[:, None]))
+    dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
+    out["max_dynamics_defect"] = dyn["max_defect"]
+    out["max_base_wrench"] = dyn["max_base_wrench"]
+    return out
+
+
+def run_leap(robot: str | RobotConfig = "go2", solver: str = "ipopt",
+             settings: LeapSettings | None = None, opts: dict | None = None,
+             model: RobotModel | None = None) -> MotionResult:
+    """Build and solve the leap; the result's ``summary`` holds :func:`leap_summary`."""
+    cfg = load_robot_config(robot) if isinstance(robot, str) else robot
+    settings = settings or LeapSettings()
+    model = model or robot_model(cfg, settings.locked_joints)
+    lp = build_leap(model, cfg, settings)
+    res = lp.wb.solve(solver, opts, motion="leap", robot=cfg.name)
+    res.summary = leap_summary(res, lp, model)
+    res.arrays["p_des"] = lp.p_des
+    return res

@@ -1,0 +1,201 @@
+"""The receding-horizon trot (the paper's Spot walk, here on go2), solved offline.
+
+The walking problem of :func:`horizon_mpc.locomotion.build_walking_problem` (whole-body,
+under-actuation, contacts switched by the trot schedule, a constant base velocity reference
+and a postural cost, no final constraint) is solved online for several seconds: at each tick
+the horizon starts at the current state, the trot schedule is sampled from the current time
+(the horizon shifts node by node), the solver is warm-started from the previous solution
+shifted by one node and runs (ILQR: ``iterations`` real-time iterations), and the robot
+moves along the solution: its first node is the next measured state (a perfect model).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as cs
+import numpy as np
+
+from horizon_mpc.config import RobotConfig, load_robot_config
+from horizon_mpc.locomotion import MpcSettings, WalkingProblem, build_walking_problem, make_gait
+from horizon_mpc.model import RobotModel
+from horizon_mpc.motions.analysis import dynamics_check
+from horizon_mpc.motions.result import MotionResult
+from horizon_mpc.motions.wholebody import robot_model
+from horizon_mpc.solvers import make_solver
+
+__all__ = ["WalkSettings", "run_walk", "walk_summary"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class WalkSettings:
+    """Duration, command and solver budget of the walk (``config/motions/walk.yaml``)."""
+
+    duration: float = 4.0  # s of motion (ticks = duration / dt of the walking problem)
+    velocity: list[float] = field(default_factory=lambda: [0.3, 0.0, 0.0])  # vx, vy, wz
+    iterations: int = 1  # ILQR real-time iterations per tick
+    bootstrap_iterations: int = 50  # the first horizon is solved to convergence
+    nlp_max_iter: int = 30  # IPOPT / GN-SQP iterations per tick (warm started)
+    average_cycles: int = 2  # gait cycles at the end over which the velocity is averaged
+    mpc: dict[str, Any] = field(default_factory=dict)  # overrides of the robot's ``mpc:``
+
+
+def _solver_options(solver: str, st: WalkSettings, mpc: MpcSettings) -> dict[str, Any]:
+    if solver == "ilqr":
+        return {"rti": True, "iterations_per_call": st.iterations, "rho_init": mpc.rho_init}
+    if solver == "ipopt":  # rows on every valid node: the schedule moves between solves
+        return {"max_iter": st.nlp_max_iter, "tol": 1e-6}
+    # qrqp (gnsqp's default) needs minutes per QP at this size; osqp a fraction of a second
+    return {"max_iter": st.nlp_max_iter, "qp_solver": "osqp"}
+
+
+def _pose_reference(q: np.ndarray, cmd: np.ndarray, n_nodes: int, dt: float) -> np.ndarray:
+    """(4, N+1) x, y, cos(yaw), sin(yaw) integrated along the command from the pose ``q``."""
+    x, y, z, w = q[3:7]
+    yaw0 = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    vx, vy, wz = cmd
+    k = dt * np.arange(n_nodes + 1)
+    yaw = yaw0 + wz * k
+    if abs(wz) > 1e-9:  # exact integration of a constant planar twist
+        sx = (np.sin(yaw) - math.sin(yaw0)) / wz
+        cx = (math.cos(yaw0) - np.cos(yaw)) / wz
+        px, py = q[0] + vx * sx - vy * cx, q[1] + vx * cx + vy * sx
+    else:
+        c, s = math.cos(yaw0), math.sin(yaw0)
+        px, py = q[0] + k * (c * vx - s * vy), q[1] + k * (s * vx + c * vy)
+    return np.vstack([px, py, np.cos(yaw), np.sin(yaw)])
+
+
+def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
+             settings: WalkSettings | None = None, opts: dict | None = None,
+             model: RobotModel | None = None) -> MotionResult:
+    """Walk for ``settings.duration`` s under the receding-horizon controller.
+
+    Returns the executed motion: states on every tick (``q``, ``v``: (n, T+1)), the first
+    input of each solution (``a``, ``f``, ``tau``: (n, T)), the stance of each tick, and in
+    ``arrays``: ``v_ref`` (6,), per-tick ``tick_time`` (s), ``iterations`` and
+    ``violation``; ``summary`` holds :func:`walk_summary`.
+    """
+    st = settings or WalkSettings()
+    cfg = load_robot_config(robot) if isinstance(robot, str) else robot
+    model = model or robot_model(cfg)
+    mpc = MpcSettings.from_dict({**cfg.section("mpc"), **st.mpc})
+    wp = build_walking_problem(model, cfg, mpc)
+    prb, N, dt = wp.prb, wp.n_nodes, mpc.dt
+    if solver != "ilqr":
+        # the NLP sees all four quaternion components; the tangent-space defects pin three
+        prb.create_constraint("unit_quaternion", cs.dot(wp.q[3:7], wp.q[3:7]) - 1.0,
+                              nodes=range(1, N + 1))
+    t0 = time.perf_counter()
+    slv = make_solver(solver, prb, {**_solver_options(solver, st, mpc), **(opts or {})})
+    build = time.perf_counter() - t0
+    g = mpc.gait
+    gait = make_gait(g.name, g.step_duration, g.step_height, g.duty_factor, len(wp.feet))
+    cmd = np.asarray(st.velocity, float)
+    wp.v_ref.assign([cmd[0], cmd[1], 0.0, 0.0, 0.0, cmd[2]])
+    tau_fn = model.inverse_dynamics(wp.feet)
+
+    q, v = wp.q_nominal.copy(), np.zeros(model.nv)
+    n_ticks = int(round(st.duration / dt))
+    Q, V, A, F, TAU, S = [q], [v], [], [], [], []
+    tick_time, iterations, violation = [], [], []
+    for i in range(n_ticks):
+        _set_tick(wp, q, v, cmd, gait.schedule(i * dt, N, dt))
+        first = i == 0
+        if first:  # bootstrap: the first horizon to convergence
+            if solver == "ilqr":
+                slv.set_option("rti", False)
+                slv.set_option("max_iter", st.bootstrap_iterations)
+            else:
+                slv.set_option("max_iter", max(st.bootstrap_iterations, 200))
+        slv.solve()
+        if first:
+            if solver == "ilqr":
+                slv.set_option("rti", True)
+            else:
+                slv.set_option("max_iter", st.nlp_max_iter)
+        sol = slv.solution
+        if not all(np.all(np.isfinite(sol[k])) for k in ("q", "v", "a", "f")):
+            raise RuntimeError(f"walk: {solver} returned a non-finite solution at tick {i} "
+                               f"({slv.stats.status})")
+        a, f = sol["a"][:, 0].copy(), sol["f"][:, 0].copy()
+        A.append(a)
+        F.append(f)
+        TAU.append(np.asarray(tau_fn(q, v, a, f)).ravel())
+        S.append(gait.schedule(i * dt, 0, dt).stance[:, 0])
+        tick_time.append(slv.stats.time)
+        iterations.append(slv.stats.iterations)
+        violation.append(slv.stats.constraint_violation)
+        q, v = sol["q"][:, 1].copy(), sol["v"][:, 1].copy()  # perfect model
+        Q.append(q)
+        V.append(v)
+        slv.shift()
+    S.append(S[-1])
+    stats = {"solver": solver, "build_time": build, "ticks": n_ticks,
+             "bootstrap_time": tick_time[0], "bootstrap_iterations": iterations[0],
+             "iterations_per_tick": float(np.mean(iterations[1:] or [0])),
+             "time": float(np.sum(tick_time)), **_percentiles(np.array(tick_time[1:])),
+             "max_constraint_violation": float(np.max(violation[1:] or [0.0]))}
+    res = MotionResult("walk", cfg.name, solver, list(wp.feet), list(model.joint_names), dt,
+                       np.array(Q).T, np.array(V).T, np.array(A).T, np.array(F).T,
+                       np.array(TAU).T, np.array(S).T, stats, integrator="euler")
+    res.arrays.update(v_ref=np.array([cmd[0], cmd[1], 0.0, 0.0, 0.0, cmd[2]]),
+                      tick_time=np.array(tick_time), iterations=np.array(iterations),
+                      violation=np.array(violation))
+    res.summary = walk_summary(res, gait.period, st, model)
+    log.info("walk with %s: %d ticks, %.1f ms per tick (median), mean vx %.3f m/s",
+             solver, n_ticks, stats["tick_ms_median"], res.summary["mean_velocity"][0])
+    return res
+
+
+def _set_tick(wp: WalkingProblem, q: np.ndarray, v: np.ndarray, cmd: np.ndarray,
+              sched) -> None:
+    """Measured state on node 0, pose reference from it, contact schedule of the horizon."""
+    wp.q.set_bounds(q, q, nodes=0)
+    wp.v.set_bounds(v, v, nodes=0)
+    wp.q.set_initial_guess(q, nodes=0)
+    wp.v.set_initial_guess(v, nodes=0)
+    wp.pose_ref.assign(_pose_reference(q, cmd, wp.n_nodes, wp.settings.dt))
+    wp.contacts.set_schedule(sched.stance, sched.swing_height())
+
+
+def _percentiles(x: np.ndarray) -> dict[str, float]:
+    if x.size == 0:
+        return {"tick_ms_median": math.nan, "tick_ms_p95": math.nan, "tick_ms_max": math.nan}
+    return {"tick_ms_median": float(np.median(x) * 1e3),
+            "tick_ms_p95": float(np.percentile(x, 95) * 1e3),
+            "tick_ms_max": float(np.max(x) * 1e3)}
+
+
+def walk_summary(res: MotionResult, period: float, st: WalkSettings,
+                 model: RobotModel) -> dict:
+    """Velocity over the last ``average_cycles`` gait cycles and force periodicity.
+
+    ``mean_velocity``: mean base-frame ``(vx, vy, wz)`` over the window;
+    ``velocity_error``: ``|mean - reference| / |reference|`` (linear part);
+    ``force_periodicity``: ``||f(last cycle) - f(cycle before)|| / ||f(last cycle)||``.
+    """
+    n_cycle = int(round(period / res.dt))
+    n_win = min(st.average_cycles * n_cycle, res.n_nodes)
+    v = res.v[:, -n_win - 1:-1]
+    mean = np.array([v[0].mean(), v[1].mean(), v[5].mean()])
+    ref = np.asarray(st.velocity, float)
+    lin_ref = np.linalg.norm(ref[:2])
+    err = float(np.linalg.norm(mean[:2] - ref[:2]) / lin_ref) if lin_ref > 0 else math.nan
+    out = {"velocity_reference": ref.tolist(), "mean_velocity": mean.tolist(),
+           "velocity_error": err, "window": [float(res.t[-n_win - 1]), float(res.t[-1])],
+           "gait_period": period, "distance": float(np.linalg.norm(res.q[:2, -1]
+                                                                   - res.q[:2, 0]))}
+    if res.n_nodes >= 2 * n_cycle:
+        last, prev = res.f[:, -n_cycle:], res.f[:, -2 * n_cycle:-n_cycle]
+        out["force_periodicity"] = float(np.linalg.norm(last - prev) / np.linalg.norm(last))
+    dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
+    out["max_dynamics_defect"] = dyn["max_defect"]
+    out["max_base_wrench"] = dyn["max_base_wrench"]
+    return out
