@@ -39,7 +39,7 @@ def render_frames(res: MotionResult, cfg: RobotConfig, fps: float = 20.0, width:
         dz = sim.q_start[2] - res.q[2, 0]
         index = {n: 7 + i for i, n in enumerate(sim.joint_names)}
         cols = [index[n] for n in res.joint_names]
-        dist = distance if distance is not None else 4.5 * float(sim.q_start[2])
+        dist = distance if distance is not None else 3.5 * float(sim.q_start[2])
         identity = np.array([0.0, 0.0, 0.0, 1.0])
         for k in range(0, res.q.shape[1], stride):
             q = sim.q_start.copy()

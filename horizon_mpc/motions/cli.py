@@ -17,6 +17,7 @@ import sys
 import time
 from collections.abc import Sequence
 
+import numpy as np
 import yaml
 
 __all__ = ["MOTIONS", "main"]
@@ -85,11 +86,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         from horizon_mpc.motions.replay import replay
 
         rep = replay(res, cfg, model.pin_model, settings.replay_kp, settings.replay_kd)
-        target = res.summary["target"][0] - res.q[0, 0]
+        target = np.array([float(res.summary["target"][0] - res.q[0, 0]), 0.0])
         extra["pybullet_replay"] = {
             "kp": settings.replay_kp, "kd": settings.replay_kd,
-            "displacement": rep.displacement.tolist(), "target_displacement": target,
-            "landing_error": float(abs(rep.displacement[0] - target)),
+            "displacement": rep.displacement.tolist(), "target_displacement": target.tolist(),
+            "landing_error": float(np.linalg.norm(rep.displacement[:2] - target)),
             "final_roll_pitch_yaw": rep.final_rpy.tolist(), "max_tilt": rep.max_tilt}
     out = args.out or f"out/motions/{args.motion}"
     render = {"yaw": 90.0} if args.motion == "leap" else {}
