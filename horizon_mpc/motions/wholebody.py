@@ -69,7 +69,7 @@ class WholeBodyProblem:
         q, v, a, f: the variables ((nq | nv | 3 n_feet) rows).
         tau: inverse-dynamics torque expression ``(nv,)`` of ``(q, v, a, f)``.
         contacts: the :class:`ContactTerms` of ``add_contacts``.
-        touchdown: per foot, ``foot z == 0`` (active on touch-down nodes).
+        touchdown: per foot, ``foot z == ground`` (active on touch-down nodes).
         above_ground: per foot, ``foot z >= swing_floor`` (active on swing nodes).
         q0: initial configuration (nq,).
         schedule: the contact schedule applied last (None before).
@@ -319,7 +319,8 @@ def build_whole_body(model: RobotModel, feet: list[str], n_nodes: int, dt: float
     floor = prb.create_parameter("swing_floor", len(feet))
     for i, foot in enumerate(feet):
         z = model.fk(foot)(q)[0][2]
-        touchdown[foot] = prb.create_constraint(f"{foot}_touchdown", z, nodes=[])
+        # floor = ground on stance nodes: the foot lands on the ground
+        touchdown[foot] = prb.create_constraint(f"{foot}_touchdown", z - floor[i], nodes=[])
         above[foot] = prb.create_constraint(f"{foot}_above_ground", z - floor[i], nodes=[],
                                             bounds=(0.0, np.inf))
 
