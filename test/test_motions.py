@@ -321,6 +321,15 @@ def test_walk_contact_forces_are_periodic(walk):
 
 
 @pytest.mark.slow
+def test_walk_stance_feet_are_on_the_ground_and_push_only_while_down(walk):
+    res, _, model = walk
+    z = foot_heights(model, res) - foot_heights(model, res)[:, :1]  # standing height 0
+    assert np.all(np.abs(z[res.stance]) <= 2e-3)
+    lifting = res.stance[:, :-1] & ~res.stance[:, 1:]  # the interval a foot lifts off in
+    assert np.all(np.abs(res.forces()[:, 2, :][lifting]) <= 1e-6)
+
+
+@pytest.mark.slow
 def test_walk_shifts_the_horizon_one_node_per_tick(walk):
     res, st, _ = walk
     assert res.n_nodes == round(st.duration / res.dt)
@@ -329,9 +338,9 @@ def test_walk_shifts_the_horizon_one_node_per_tick(walk):
 
 @pytest.fixture(scope="module")
 def short_walks(go2):
-    """Five ticks of the walk with each NLP solver (both converge at every tick)."""
+    """Three ticks of the walk with each NLP solver (both converge at every tick)."""
     cfg, model = go2
-    st = _settings("walk", WalkSettings, "go2", duration=0.1)
+    st = _settings("walk", WalkSettings, "go2", duration=0.06)
     return {s: run_walk(cfg, s, st, model=model) for s in ("ipopt", "gnsqp")}
 
 
@@ -339,6 +348,9 @@ def short_walks(go2):
 @pytest.mark.parametrize("solver", ["ipopt", "gnsqp"])
 def test_walk_is_solvable_with_the_nlp_solvers(solver, short_walks, go2):
     res = short_walks[solver]
+    assert res.n_nodes == 3
+    it = res.arrays["iterations"]  # converged: below the iteration limits
+    assert it[0] < 200 and np.all(it[1:] < _settings("walk", WalkSettings, "go2").nlp_max_iter)
     assert res.stats["max_constraint_violation"] <= 1e-6
     check = dynamics_check(res, go2[1].pin_model, res.foot_radius, res.integrator)
     assert check["max_defect"] <= 1e-6

@@ -25,6 +25,7 @@ from horizon_mpc.locomotion import MpcSettings, WalkingProblem, build_walking_pr
 from horizon_mpc.model import RobotModel
 from horizon_mpc.motions.analysis import dynamics_check
 from horizon_mpc.motions.result import MotionResult
+from horizon_mpc.motions.schedule import touchdown_nodes
 from horizon_mpc.motions.wholebody import robot_model
 from horizon_mpc.solvers import make_solver
 
@@ -39,10 +40,11 @@ class WalkSettings:
 
     duration: float = 4.0  # s of motion (ticks = duration / dt of the walking problem)
     velocity: list[float] = field(default_factory=lambda: [0.3, 0.0, 0.0])  # vx, vy, wz
-    iterations: int = 1  # ILQR real-time iterations per tick
+    iterations: int = 3  # ILQR real-time iterations per tick
     bootstrap_iterations: int = 50  # the first horizon is solved to convergence
     nlp_max_iter: int = 30  # IPOPT / GN-SQP iterations per tick (warm started)
     average_cycles: int = 2  # gait cycles at the end over which the velocity is averaged
+    w_touchdown: float = 1e6  # ILQR: touch-down height cost (1/m^2; the NLPs: a constraint)
     mpc: dict[str, Any] = field(default_factory=dict)  # overrides of the robot's ``mpc:``
 
 
@@ -51,8 +53,10 @@ def _solver_options(solver: str, st: WalkSettings, mpc: MpcSettings) -> dict[str
         return {"rti": True, "iterations_per_call": st.iterations, "rho_init": mpc.rho_init}
     if solver == "ipopt":  # rows on every valid node: the schedule moves between solves
         return {"max_iter": st.nlp_max_iter, "tol": 1e-6}
-    # qrqp (gnsqp's default) needs minutes per QP at this size; osqp a fraction of a second
-    return {"max_iter": st.nlp_max_iter, "qp_solver": "osqp"}
+    # qrqp (gnsqp's default) needs minutes per QP at this size, osqp a fraction of a second;
+    # with osqp's steps the stationarity measure cycles around 1e-5 once the cost is
+    # converged (to 8 digits): stop at 1e-4
+    return {"max_iter": st.nlp_max_iter, "qp_solver": "osqp", "tol": 1e-4}
 
 
 def _pose_reference(q: np.ndarray, cmd: np.ndarray, n_nodes: int, dt: float) -> np.ndarray:
@@ -92,6 +96,16 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
         # the NLP sees all four quaternion components; the tangent-space defects pin three
         prb.create_constraint("unit_quaternion", cs.dot(wp.q[3:7], wp.q[3:7]) - 1.0,
                               nodes=range(1, N + 1))
+    # the walking problem keeps a stance foot still but never puts it on the ground: a foot
+    # lands where its swing ends (measured: ~2 cm up). Touch-down at the standing height: a
+    # constraint for the NLP solvers, a stiff cost for the ILQR (with the constraint, whose
+    # state-only rows move with the schedule, it diverged)
+    touchdown = {}
+    for foot in wp.feet:
+        z = model.fk(foot)(wp.q)[0][2] - float(model.fk(foot)(wp.q_nominal)[0][2])
+        name = f"{foot}_touchdown"
+        touchdown[foot] = (prb.create_cost(name, z, nodes=[], weight=st.w_touchdown)
+                           if solver == "ilqr" else prb.create_constraint(name, z, nodes=[]))
     t0 = time.perf_counter()
     slv = make_solver(solver, prb, {**_solver_options(solver, st, mpc), **(opts or {})})
     build = time.perf_counter() - t0
@@ -106,7 +120,7 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
     Q, V, A, F, TAU, S = [q], [v], [], [], [], []
     tick_time, iterations, violation = [], [], []
     for i in range(n_ticks):
-        _set_tick(wp, q, v, cmd, gait.schedule(i * dt, N, dt))
+        _set_tick(wp, touchdown, q, v, cmd, gait.schedule(i * dt, N, dt))
         first = i == 0
         if first:  # bootstrap: the first horizon to convergence
             if solver == "ilqr":
@@ -154,15 +168,23 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
     return res
 
 
-def _set_tick(wp: WalkingProblem, q: np.ndarray, v: np.ndarray, cmd: np.ndarray,
-              sched) -> None:
-    """Measured state on node 0, pose reference from it, contact schedule of the horizon."""
+def _set_tick(wp: WalkingProblem, touchdown: dict, q: np.ndarray, v: np.ndarray,
+              cmd: np.ndarray, sched) -> None:
+    """Measured state on node 0, pose reference from it, contact schedule of the horizon
+    (feet on the ground at touch-down; a foot pushes only over intervals it is down at both
+    ends of, not over the one in which it lifts off)."""
     wp.q.set_bounds(q, q, nodes=0)
     wp.v.set_bounds(v, v, nodes=0)
     wp.q.set_initial_guess(q, nodes=0)
     wp.v.set_initial_guess(v, nodes=0)
     wp.pose_ref.assign(_pose_reference(q, cmd, wp.n_nodes, wp.settings.dt))
-    wp.contacts.set_schedule(sched.stance, sched.swing_height())
+    st = np.asarray(sched.stance, bool)
+    wp.contacts.set_schedule(st, sched.swing_height())
+    loaded = st[:, :-1] & st[:, 1:]
+    for i, (foot, nodes) in enumerate(zip(wp.feet, touchdown_nodes(st), strict=True)):
+        touchdown[foot].set_nodes(nodes[nodes > 0])  # node 0 is the measured state
+        wp.contacts.friction[foot].set_nodes(np.flatnonzero(loaded[i]))
+        wp.contacts.zero_force[foot].set_nodes(np.flatnonzero(~loaded[i]))
 
 
 def _percentiles(x: np.ndarray) -> dict[str, float]:
