@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings, build_walking_problem, make_gait
 from horizon_mpc.model import RobotModel
@@ -72,7 +73,9 @@ class WalkingMpc:
         self.solver = make_solver("ilqr", self.wp.prb, {
             "rti": True, "iterations_per_call": int(iterations),
             "rho_init": self.settings.rho_init})
-        self._id = model.compile(model.inverse_dynamics(self.wp.feet).map(self.wp.n_nodes))
+        # per tick: numpy in/out through preallocated buffers (no DM conversion)
+        self._id = BufferedFunction(
+            model.compile(model.inverse_dynamics(self.wp.feet).map(self.wp.n_nodes)))
         self.build_time = time.perf_counter() - t
         g = self.settings.gait
         self.scheduler = GaitScheduler(make_gait(g.name, g.step_duration, g.step_height,
@@ -221,7 +224,7 @@ class WalkingMpc:
 
     def _plan(self, t: float) -> Plan:
         sol = self.solver.solution
-        tau = np.asarray(self._id(sol["q"][:, :-1], sol["v"][:, :-1], sol["a"], sol["f"]))
+        tau = self._id(sol["q"][:, :-1], sol["v"][:, :-1], sol["a"], sol["f"])[0].copy()
         stats = self.solver.stats.as_dict()
         stats.pop("history", None)
         return Plan(t, self.settings.dt, sol["q"].copy(), sol["v"].copy(), sol["a"].copy(),
