@@ -129,8 +129,9 @@ class MpcNode(Node):
         self._pub_traj = self.create_publisher(JointTrajectory, "joint_trajectory", 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_path = self.create_publisher(Path, "~/predicted_base_path", 10)
-        self.create_subscription(JointState, "joint_states", self._on_joint_state, 10)
-        self.create_subscription(Odometry, "odom", self._on_odom, 10)
+        # depth 1: a tick plans from the newest state, never from a backlog of stale ones
+        self.create_subscription(JointState, "joint_states", self._on_joint_state, 1)
+        self.create_subscription(Odometry, "odom", self._on_odom, 1)
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if self.trigger == "timer":
