@@ -1,10 +1,11 @@
 """The QR null-space projection of equality rows gives what the SVD one does.
 
-``project(..., method='qr')`` (the default) factorises each node's rows with a batched QR
-and hands only the nodes whose rows are (nearly) dependent, or more than the inputs, to the
-batched SVD of ``method='svd'``. Both must return the same ``P_e``, ``P_x``, ``pinv``,
-``free`` and ``rank_deficient``, and orthonormal bases ``Z`` of the same null spaces (not
-the same bases), so that the backward pass computes the same gains.
+``project(..., method='qr')`` (the default) factorises each node's rows with a QR (the
+compiled kernel of ``riccati.c``, or batched numpy: every test runs with both) and hands
+only the nodes whose rows are (nearly) dependent, or more than the inputs, to the batched
+SVD of ``method='svd'``. Both must return the same ``P_e``, ``P_x``, ``pinv``, ``free``
+and ``rank_deficient``, and orthonormal bases ``Z`` of the same null spaces (not the same
+bases), so that the backward pass computes the same gains.
 
 Problems are random: D rows are Gaussian, so full-rank nodes have condition numbers of a
 few tens; 1e-9 relative to each output's largest entry leaves five orders of magnitude
@@ -16,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from horizon_mpc.solvers.ilqr import equality
+from horizon_mpc.solvers.ilqr import equality, riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, Projection, project
 from horizon_mpc.solvers.ilqr.riccati import backward_pass
 
@@ -98,6 +99,17 @@ def svd_batches(monkeypatch) -> list[int]:
 
     monkeypatch.setattr(equality, "_svd_solve", spy)
     return sizes
+
+
+@pytest.fixture(autouse=True, params=["compiled", "numpy"])
+def qr_kernel(request, monkeypatch) -> str:
+    """Every test with the compiled QR kernel and with the batched numpy one."""
+    if request.param == "compiled":
+        if not riccati_c.available():
+            pytest.skip("no compiled Riccati library (no C compiler or codegen disabled)")
+    else:
+        monkeypatch.setattr(equality, "_compiled", lambda: False)
+    return request.param
 
 
 def _both(layout: EqualityLayout, args: list) -> tuple[Projection, Projection]:
@@ -291,5 +303,5 @@ def test_triangular_inverse_not_done_in_place_is_copied_back(monkeypatch):
 
 def test_unknown_method_is_refused():
     layout, args = _problem(N=3)
-    with pytest.raises(ValueError, match="'lu'.*'qr', 'svd'"):
+    with pytest.raises(ValueError, match="'lu'.*'qr', 'qr-numpy', 'svd'"):
         project(layout, *args, method="lu")

@@ -243,3 +243,35 @@ def test_unavailable_without_a_compiler_says_why(compiled, monkeypatch, caplog):
     with pytest.raises(RuntimeError, match="unavailable"):
         riccati_c.backward_pass_c(*_lq(N=2, ndx=2, nu=1), 0.0)
     riccati_c._forget()
+
+
+def test_projection_kernel_matches_the_numpy_qr(isa):
+    """``project_rows_c`` (each ISA) = the batched numpy QR; dependent, too many and
+    non-finite rows are flagged (not ok) for the caller's SVD."""
+    from horizon_mpc.solvers.ilqr import equality
+
+    rng = np.random.default_rng(4)
+    N, m, nu, ndx = 9, 7, 5, 6
+    W = rng.standard_normal((N * m + 1, nu + ndx + 1))
+    W[-1] = 0.0
+    rows = rng.random((N, m)) < 0.6
+    rows[0] = False  # no row: free input
+    rows[1, :3], rows[1, 3:] = True, False
+    W[m + 2] = 2.0 * W[m]  # node 1: dependent rows
+    rows[2] = True  # node 2: more rows than inputs
+    rows[3, :2], rows[3, 2:] = True, False
+    W[3 * m, 0] = np.nan  # node 3: not finite
+    rows[4:, :] = rows[4:, :] & (np.arange(m) < 5)  # the rest: at most nu rows
+    count = np.count_nonzero(rows, axis=1)
+    P_e, P_x, Z, free, pinv, ok, unmet = riccati_c.project_rows_c(W, rows, nu, 1e-9)
+    ref, fallback = equality._qr_solve_numpy(W, rows, count, nu, 1e-9)
+    np.testing.assert_array_equal(np.flatnonzero(~ok), fallback)
+    good = ok.copy()
+    assert good[0] and good[4:].all() and not good[1:4].any()
+    for got, want in ((P_e, ref.P_e), (P_x, ref.P_x), (pinv, ref.pinv), (free, ref.free)):
+        np.testing.assert_allclose(got[good], want[good], rtol=1e-10, atol=1e-12)
+    np.testing.assert_array_equal(unmet[good], ref.unmet[good])
+    # orthonormal null-space bases of the same spaces (signs may differ)
+    proj = Z @ np.swapaxes(Z, 1, 2)
+    np.testing.assert_allclose(proj[good], (ref.Z @ np.swapaxes(ref.Z, 1, 2))[good], atol=1e-12)
+    np.testing.assert_array_equal(Z[0], np.eye(nu))

@@ -29,6 +29,8 @@ def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "") -> np.ndarr
         return np.arange(n_valid)[nodes]
     if isinstance(nodes, (int, np.integer)):
         idx = np.array([int(nodes)])
+    elif isinstance(nodes, np.ndarray) and nodes.dtype.kind in "iu" and nodes.ndim == 1:
+        idx = nodes.astype(int)  # the fast path of per-tick schedules (np.flatnonzero)
     else:
         try:
             idx = np.array([int(n) for n in nodes], dtype=int)
@@ -39,7 +41,9 @@ def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "") -> np.ndarr
         bad = idx[(idx < 0) | (idx >= n_valid)]
         raise IndexError(f"nodes {bad.tolist()} out of range for {what}: valid nodes are "
                          f"0..{n_valid - 1}")
-    return np.unique(idx)
+    if idx.size > 1 and np.any(idx[1:] <= idx[:-1]):
+        return np.unique(idx)
+    return idx
 
 
 def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:

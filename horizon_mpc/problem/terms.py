@@ -46,6 +46,8 @@ class Term:
         self.valid_nodes = valid_nodes
         self.n_nodes = n_nodes
         self._active = np.zeros(n_nodes + 1, dtype=bool)
+        self._valid_mask = np.zeros(n_nodes + 1, dtype=bool)
+        self._valid_mask[valid_nodes] = True
         self.set_nodes(nodes)
 
     def __repr__(self) -> str:
@@ -55,7 +57,7 @@ class Term:
         if nodes is None:
             return self.valid_nodes.copy()
         idx = select_nodes(nodes, self.n_nodes + 1, f"{self.kind} {self.name!r}")
-        invalid = np.setdiff1d(idx, self.valid_nodes)
+        invalid = idx[~self._valid_mask[idx]]
         if invalid.size:
             raise IndexError(
                 f"{self.kind} {self.name!r} cannot be evaluated on nodes {invalid.tolist()} "

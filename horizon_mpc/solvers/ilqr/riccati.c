@@ -145,6 +145,30 @@ int riccati_rollout(int N, int ndx, int nu, const double *const *in, const int64
     return 0;
 }
 
+/*
+ * Null-space parametrisation of the equality rows of every node (equality.py's batched QR).
+ *  W (N m + 1, nu + ndx + 1), C-contiguous: slot j of node i is row i m + j = [D | C | e]
+ *      (equality.py's _stack_rows); rows (N m): 1 where the slot holds a real row.
+ *  rtol: the rows are independent when ||R||_F ||R^-1||_F < 1 / rtol (R of D_c^T = Q R).
+ *  Outputs, C-contiguous, every element written: P_e (N, nu), P_x (N, nu, ndx),
+ *  Z (N, nu, nu) (range columns exactly zero), free (N, nu), pinv (N, nu, m) (D^+, zero on
+ *  unused slots), ok (N) (0: more rows than inputs, (nearly) dependent or non-finite rows:
+ *  the caller takes the SVD there; outputs of such a node are unspecified), unmet (N).
+ * Per node with c rows (in slot order): Householder QR of D_c^T (nu x c); Q formed
+ * explicitly; D^+ = Q[:, :c] R^-T, P_x = -D^+ C_c, P_e = -D^+ e_c, Z = Q[:, c:].
+ * Returns 0, or -1: out of memory.
+ */
+int riccati_project(int N, int m, int nu, int ndx, const double *W, const uint8_t *rows,
+                    double rtol, double *P_e, double *P_x, double *Z, double *fr,
+                    double *pinv, uint8_t *ok, uint8_t *unmet, int variant)
+{
+#if HAVE_AVX2
+    if (use_avx2(variant))
+        return project_avx2(N, m, nu, ndx, W, rows, rtol, P_e, P_x, Z, fr, pinv, ok, unmet);
+#endif
+    return project_base(N, m, nu, ndx, W, rows, rtol, P_e, P_x, Z, fr, pinv, ok, unmet);
+}
+
 #else
 /* ================================================================== kernel pass (per ISA) */
 /* Everything below is compiled once per ISA, with VW doubles per vector; ISA(name) gives
@@ -170,6 +194,7 @@ int riccati_rollout(int N, int ndx, int nu, const double *const *in, const int64
 #define lower_to_upper ISA(lower_to_upper)
 #define backward ISA(backward)
 #define rollout ISA(rollout)
+#define project ISA(project)
 
 typedef double vec __attribute__((vector_size(8 * VW)));
 
@@ -573,6 +598,139 @@ static void rollout(int N, int ndx, int nu, const double *const *in, const int64
     }
 }
 
+/* The projection (see riccati_project), per ISA: plain loops the compiler vectorises. */
+static int project(int N, int m, int nu, int ndx, const double *W, const uint8_t *rows,
+                   double rtol, double *P_e, double *P_x, double *Z, double *fr,
+                   double *pinv, uint8_t *ok, uint8_t *unmet)
+{
+    const int ld = nu + ndx + 1;
+    const size_t mm = m > 0 ? (size_t)m : 1, uu = nu > 0 ? (size_t)nu : 1;
+    double *a = malloc(sizeof(double) * mm * uu);   /* c x nu: column j of D_c^T, reflected */
+    double *R = malloc(sizeof(double) * mm * mm);   /* c x c, upper */
+    double *Ri = malloc(sizeof(double) * mm * mm);  /* R^-1, upper */
+    double *Q = malloc(sizeof(double) * uu * uu);   /* nu x nu */
+    double *pv = malloc(sizeof(double) * uu * mm);  /* nu x c: D^+ compacted */
+    double *wq = malloc(sizeof(double) * uu);       /* nu: v^T Q */
+    int *slot = malloc(sizeof(int) * mm);
+    int ret = -1;
+    if (!a || !R || !Ri || !Q || !pv || !wq || !slot) goto done;
+    for (int i = 0; i < N; i++) {
+        double *pe = P_e + (size_t)i * nu, *px = P_x + (size_t)i * nu * ndx;
+        double *z = Z + (size_t)i * nu * nu, *f = fr + (size_t)i * nu;
+        double *pi = pinv + (size_t)i * nu * m;
+        int c = 0;
+        for (int j = 0; j < m; j++)
+            if (rows[(size_t)i * m + j]) slot[c++] = j;
+        memset(pe, 0, sizeof(double) * nu);
+        memset(px, 0, sizeof(double) * nu * ndx);
+        memset(pi, 0, sizeof(double) * nu * m);
+        memset(z, 0, sizeof(double) * nu * nu);
+        unmet[i] = 0;
+        ok[i] = c <= nu;
+        if (!ok[i]) continue;
+        for (int p = 0; p < nu; p++) f[p] = p >= c;
+        if (c == 0) {
+            for (int p = 0; p < nu; p++) z[p * nu + p] = 1.0;
+            continue;
+        }
+        for (int j = 0; j < c; j++)
+            memcpy(a + (size_t)j * nu, W + ((size_t)i * m + slot[j]) * ld, sizeof(double) * nu);
+        /* Householder: H_j = I - 2 v v^T / (v^T v), v stored in a[j][j:] */
+        int singular = 0;
+        for (int j = 0; j < c; j++) {
+            double *aj = a + (size_t)j * nu, nrm = 0.0;
+            for (int r = j; r < nu; r++) nrm += aj[r] * aj[r];
+            nrm = sqrt(nrm);
+            if (!(nrm > 0.0)) { singular = 1; break; }  /* zero or NaN */
+            double alpha = aj[j] > 0.0 ? -nrm : nrm;
+            for (int q = 0; q < j; q++) R[q * c + j] = aj[q];
+            R[j * c + j] = alpha;
+            for (int q = j + 1; q < c; q++) R[q * c + j] = 0.0;
+            aj[j] -= alpha;
+            double vv = 0.0;
+            for (int r = j; r < nu; r++) vv += aj[r] * aj[r];
+            if (!(vv > 0.0)) { singular = 1; break; }
+            for (int q = j + 1; q < c; q++) {
+                double *aq = a + (size_t)q * nu, d = 0.0;
+                for (int r = j; r < nu; r++) d += aj[r] * aq[r];
+                d *= 2.0 / vv;
+                for (int r = j; r < nu; r++) aq[r] -= d * aj[r];
+            }
+        }
+        if (singular) { ok[i] = 0; continue; }
+        /* R^-1 by back substitution, column by column; Frobenius norms for the test */
+        double nR = 0.0, nRi = 0.0;
+        for (int p = 0; p < c * c; p++) Ri[p] = 0.0;
+        for (int col = 0; col < c; col++) {
+            Ri[col * c + col] = 1.0 / R[col * c + col];
+            for (int r = col - 1; r >= 0; r--) {
+                double sum = 0.0;
+                for (int q = r + 1; q <= col; q++) sum += R[r * c + q] * Ri[q * c + col];
+                Ri[r * c + col] = -sum / R[r * c + r];
+            }
+        }
+        for (int p = 0; p < c * c; p++) { nR += R[p] * R[p]; nRi += Ri[p] * Ri[p]; }
+        double cond2 = nR * nRi;
+        if (!(cond2 < 1.0 / (rtol * rtol))) { ok[i] = 0; continue; }  /* NaN: not ok */
+        /* Q = H_0 H_1 ... H_{c-1}: the reflectors applied to I from the last one */
+        for (int p = 0; p < nu * nu; p++) Q[p] = 0.0;
+        for (int p = 0; p < nu; p++) Q[p * nu + p] = 1.0;
+        for (int j = c - 1; j >= 0; j--) {  /* Q[j:, j:] -= (2 / v^T v) v (v^T Q[j:, j:]) */
+            const double *v = a + (size_t)j * nu;
+            double vv = 0.0;
+            for (int r = j; r < nu; r++) vv += v[r] * v[r];
+            for (int col = j; col < nu; col++) wq[col] = 0.0;
+            for (int r = j; r < nu; r++) {  /* rows: contiguous inner loops */
+                const double *qr = Q + r * nu, vr = v[r];
+                for (int col = j; col < nu; col++) wq[col] += vr * qr[col];
+            }
+            for (int r = j; r < nu; r++) {
+                double *qr = Q + r * nu, g = 2.0 * v[r] / vv;
+                for (int col = j; col < nu; col++) qr[col] -= g * wq[col];
+            }
+        }
+        /* D^+ = Q[:, :c] R^-T: pv[p][j] = sum_{l >= j} Q[p][l] Ri[j][l] */
+        for (int p = 0; p < nu; p++)
+            for (int j = 0; j < c; j++) {
+                double sum = 0.0;
+                for (int l = j; l < c; l++) sum += Q[p * nu + l] * Ri[j * c + l];
+                pv[p * c + j] = sum;
+                pi[(size_t)p * m + slot[j]] = sum;
+            }
+        /* P_x = -D^+ C, P_e = -D^+ e */
+        for (int j = 0; j < c; j++) {
+            const double *wj = W + ((size_t)i * m + slot[j]) * ld;
+            for (int p = 0; p < nu; p++) {
+                double g = -pv[p * c + j];
+                double *row = px + (size_t)p * ndx;
+                for (int r = 0; r < ndx; r++) row[r] += g * wj[nu + r];
+                pe[p] += g * wj[nu + ndx];
+            }
+        }
+        /* null-space basis: the columns c.. of Q */
+        for (int p = 0; p < nu; p++)
+            for (int col = c; col < nu; col++) z[p * nu + col] = Q[p * nu + col];
+        /* well conditioned (||D||_F ||D^+||_F <= 3e4): the rows are met far within the
+         * 1e-8 test below; otherwise check it */
+        if (cond2 > 1e9) {
+            double emax = 0.0, res = 0.0;
+            for (int j = 0; j < c; j++) {
+                const double *wj = W + ((size_t)i * m + slot[j]) * ld;
+                double r = wj[nu + ndx];
+                for (int p = 0; p < nu; p++) r += wj[p] * pe[p];
+                if (fabs(wj[nu + ndx]) > emax) emax = fabs(wj[nu + ndx]);
+                if (fabs(r) > res) res = fabs(r);
+            }
+            unmet[i] = res > 1e-8 * (1.0 + emax);
+        }
+    }
+    ret = 0;
+done:
+    free(a); free(R); free(Ri); free(Q); free(pv); free(wq); free(slot);
+    return ret;
+}
+
+#undef project
 #undef vec
 #undef vload
 #undef vstore

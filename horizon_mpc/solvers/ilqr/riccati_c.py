@@ -43,7 +43,8 @@ from horizon_mpc import codegen
 from horizon_mpc.solvers.ilqr.equality import Projection
 from horizon_mpc.solvers.ilqr.riccati import BackwardResult
 
-__all__ = ["available", "backward_pass_c", "library_path", "linear_rollout_c", "uses_avx2"]
+__all__ = ["available", "backward_pass_c", "library_path", "linear_rollout_c", "project_rows_c",
+           "uses_avx2"]
 
 _log = logging.getLogger(__name__)
 
@@ -71,7 +72,7 @@ def _key(source: bytes) -> str:
     h = hashlib.sha256()
     # the machine too: a cache directory shared by x86-64 and aarch64 hosts keeps one of each
     for part in (source, " ".join(FLAGS).encode(), codegen.CC.encode(),
-                 platform.machine().encode(), b"riccati-v1"):
+                 platform.machine().encode(), b"riccati-v2"):
         h.update(part)
         h.update(b"\0")
     return h.hexdigest()[:24]
@@ -142,6 +143,8 @@ def _bind(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.riccati_backward.restype = i
     lib.riccati_rollout.argtypes = [i, i, i, ctypes.POINTER(p), p, p, p, i]
     lib.riccati_rollout.restype = i
+    lib.riccati_project.argtypes = [i, i, i, i, p, p, d, p, p, p, p, p, p, p, i]
+    lib.riccati_project.restype = i
     lib.riccati_has_avx2.argtypes = []
     lib.riccati_has_avx2.restype = i
     return lib
@@ -291,3 +294,39 @@ def linear_rollout_c(A, B, f, bw: BackwardResult,
                            dU.ctypes.data, _variant()) != 0:
         raise MemoryError("riccati_rollout: out of memory for its workspace")
     return dX, dU
+
+
+def project_rows_c(W_flat: np.ndarray, rows: np.ndarray, nu: int,
+                   rtol: float) -> tuple[np.ndarray, ...]:
+    """The per-node QR projection of :func:`.equality.project`, in C, for every node.
+
+    Args:
+        W_flat (N m + 1, nu + ndx + 1), rows (N, m): as ``equality._stack_rows`` returns them.
+        nu: inputs per node; rtol: the independence threshold of ``equality.project``.
+
+    Returns:
+        ``(P_e (N, nu), P_x (N, nu, ndx), Z (N, nu, nu), free (N, nu), pinv (N, nu, m),
+        ok (N,), unmet (N,))``; where ``ok`` is False (more rows than ``nu``, rows (nearly)
+        dependent or not finite) the node's other outputs are meaningless: take the SVD.
+
+    Raises:
+        RuntimeError: the compiled library is not available (see :func:`available`).
+        ValueError: the shapes do not fit.
+    """
+    lib = _load()
+    n, m = rows.shape
+    W = np.ascontiguousarray(W_flat, dtype=np.float64)
+    if W.ndim != 2 or W.shape[0] != n * m + 1 or W.shape[1] < nu + 1:
+        raise ValueError(f"W_flat has shape {W.shape}; expected ({n * m + 1}, nu + ndx + 1)")
+    ndx = W.shape[1] - nu - 1
+    mask = np.ascontiguousarray(rows, dtype=np.uint8)
+    P_e, P_x = np.empty((n, nu)), np.empty((n, nu, ndx))
+    Z, free, pinv = np.empty((n, nu, nu)), np.empty((n, nu)), np.empty((n, nu, m))
+    ok, unmet = np.empty(n, np.uint8), np.empty(n, np.uint8)
+    ret = lib.riccati_project(n, m, nu, ndx, W.ctypes.data, mask.ctypes.data, float(rtol),
+                              P_e.ctypes.data, P_x.ctypes.data, Z.ctypes.data,
+                              free.ctypes.data, pinv.ctypes.data, ok.ctypes.data,
+                              unmet.ctypes.data, _variant())
+    if ret != 0:
+        raise MemoryError("riccati_project: out of memory for its workspace")
+    return P_e, P_x, Z, free, pinv, ok.astype(bool), unmet.astype(bool)
