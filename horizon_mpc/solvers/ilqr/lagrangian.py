@@ -41,6 +41,11 @@ class AugmentedLagrangian:
         self.lb, self.ub, self.eq = lb, ub, eq
         self.has_lo = np.isfinite(lb) & ~eq
         self.has_up = np.isfinite(ub) & ~eq
+        # finite copies (0 where a row has no such bound) for the per-evaluation arithmetic
+        self._b = np.where(eq, lb, 0.0)
+        self._lo = np.where(self.has_lo, lb, 0.0)
+        self._up = np.where(self.has_up, ub, 0.0)
+        self._any = (bool(eq.any()), bool(self.has_up.any()), bool(self.has_lo.any()))
 
     def violation(self, c: np.ndarray) -> np.ndarray:
         """Per-row violation ``max(lb - c, c - ub, 0)``, shape of ``c``."""
@@ -52,22 +57,21 @@ class AugmentedLagrangian:
     def value(self, c: np.ndarray) -> float:
         """The augmented-Lagrangian terms summed over rows."""
         rho = self.rho
+        any_eq, any_up, any_lo = self._any
         total = 0.0
-        if self.eq.any():
-            e = np.where(self.eq, c - np.where(self.eq, self.lb, 0.0), 0.0)
+        if any_eq:
+            e = np.where(self.eq, c - self._b, 0.0)
             total += float(np.sum(self.lam * e + 0.5 * rho * e * e))
-        if self.has_up.any():
-            t = np.where(self.has_up, self.lam_up + rho * (c - np.where(self.has_up, self.ub, 0)),
-                         0.0)
-            total += float(np.sum((np.maximum(t, 0.0) ** 2 - np.where(self.has_up,
-                                                                      self.lam_up, 0) ** 2)
-                                  / (2 * rho)))
-        if self.has_lo.any():
-            t = np.where(self.has_lo, self.lam_lo + rho * (np.where(self.has_lo, self.lb, 0) - c),
-                         0.0)
-            total += float(np.sum((np.maximum(t, 0.0) ** 2 - np.where(self.has_lo,
-                                                                      self.lam_lo, 0) ** 2)
-                                  / (2 * rho)))
+        if any_up:
+            t = np.where(self.has_up, self.lam_up + rho * (c - self._up), 0.0)
+            np.maximum(t, 0.0, out=t)
+            lam = np.where(self.has_up, self.lam_up, 0.0)
+            total += float(np.sum((t * t - lam * lam) / (2 * rho)))
+        if any_lo:
+            t = np.where(self.has_lo, self.lam_lo + rho * (self._lo - c), 0.0)
+            np.maximum(t, 0.0, out=t)
+            lam = np.where(self.has_lo, self.lam_lo, 0.0)
+            total += float(np.sum((t * t - lam * lam) / (2 * rho)))
         return total
 
     def weights_targets(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

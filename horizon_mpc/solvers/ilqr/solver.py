@@ -43,6 +43,12 @@ def _blocks(out: np.ndarray, n: int, rows: int, cols: int) -> np.ndarray:
     return out.T.reshape(n, cols, rows).transpose(0, 2, 1)
 
 
+def _all_finite(arrays) -> bool:
+    """True if no array holds NaN or inf: one sum per array (NaN and inf propagate through
+    it; a finite sum could only overflow past 1e308, far beyond any meaningful value)."""
+    return all(math.isfinite(float(np.sum(a))) for a in arrays)
+
+
 class IlqrSolver(Solver):
     """Constrained multiple-shooting ILQR; see the module docstring.
 
@@ -164,13 +170,17 @@ class IlqrSolver(Solver):
             lbN[0, :ncN][self._layout.term], ubN[0, :ncN][self._layout.term] = -np.inf, np.inf
         self._al.set_bounds(lb, ub)
         self._alN.set_bounds(lbN, ubN)
-        self.Wr = self._weights(m.stage_costs, N, range(N))  # (N, nr)
-        self.WrN = self._weights(m.term_costs, 1, [N])  # (1, nrN)
+        self.Wr = self._weights(m.stage_costs, N, slice(0, N))  # (N, nr)
+        self.WrN = self._weights(m.term_costs, 1, slice(N, N + 1))  # (1, nrN)
 
     @staticmethod
     def _weights(costs, n: int, nodes) -> np.ndarray:
-        cols = [np.outer(c.active[list(nodes)], c.weight) for c in costs]
-        return np.hstack(cols) if cols else np.zeros((n, 0))
+        """(n, rows) weight of each residual row on ``nodes`` (0 where its cost is off)."""
+        if not costs:
+            return np.zeros((n, 0))
+        active = np.array([c._active[nodes] for c in costs], dtype=float)  # (costs, n)
+        dims = [c.dim for c in costs]
+        return active.T.repeat(dims, axis=1) * np.concatenate([c._weight for c in costs])
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate(self, X: np.ndarray, U: np.ndarray) -> dict[str, Any] | None:
@@ -189,7 +199,7 @@ class IlqrSolver(Solver):
             ev["d0"] = self._difference(X[0], self.x_init)[0].reshape(m.ndx).copy()
         else:
             ev["d0"] = np.zeros(m.ndx)
-        if not all(np.all(np.isfinite(v)) for v in ev.values()):
+        if not _all_finite(ev.values()):
             return None
         lay = self._layout
         eq = np.where(self._eq_rows, ev["c"][:, :m.nc_con] - lay.b, 0.0)
@@ -228,7 +238,7 @@ class IlqrSolver(Solver):
             q["cx"] = _blocks(cx, N, m.nc_con, ndx)
             q["cu"] = _blocks(cu, N, m.nc_con, nu)
             q["cxN"] = np.asarray(cxN).reshape(m.ncN_con, ndx)
-        if not all(np.all(np.isfinite(v)) for v in q.values()):
+        if not _all_finite(q.values()):
             return None
         return q
 
