@@ -165,6 +165,21 @@ def test_rti_mode_runs_exactly_the_requested_iterations_and_exposes_gains():
     assert np.all(np.isfinite(solver.feedback_gains))
 
 
+@pytest.mark.parametrize("rti, expected", [(True, 1), (False, 3)])
+def test_multipliers_are_updated_once_per_real_time_call(rti, expected):
+    """Real-time iterations take one dual step per call (after the last iteration); a
+    converging solve takes one per iteration."""
+    prb, _ = build_cartpole(n_nodes=20)
+    solver = make_solver("ilqr", prb, {**OPTS, "rti": rti, "iterations_per_call": 3,
+                                       "max_iter": 3, "tol": 0.0})
+    calls = []
+    update = solver._al.update
+    solver._al.update = lambda c, *a, **k: (calls.append(c.copy()), update(c, *a, **k))[1]
+    solver.solve()
+    assert solver.stats.iterations == 3
+    assert len(calls) == expected
+
+
 def test_nan_in_the_problem_is_reported_and_never_returned():
     prb = Problem(10)
     x = prb.create_state_variable("x", 1)

@@ -349,14 +349,18 @@ class IlqrSolver(Solver):
             stationary = abs(info.get("expected", 0.0)) <= o["tol"] * (1.0 + ev["cost"]) or (
                 info.get("step_norm", 1.0) < 1e-10)
             # multiplier update after every iteration (a primal-dual scheme; waiting for
-            # inner convergence costs many more Gauss-Newton iterations)
+            # inner convergence costs many more Gauss-Newton iterations); real-time
+            # iterations update them once per call, after the last one: several dual steps
+            # on one linearisation of a moving problem overshoot (go2 fell with 2 iterations
+            # per tick that way, and walks the default profile with 1, 2 or 3 this way)
             # real-time iterations keep the penalty fixed: the problem moves between calls, so
             # "not decreasing fast enough" says nothing and the penalty would ratchet up
             # without bound through the shifts, ruining the conditioning of the steps
-            factor = 1.0 if rti else o["rho_factor"]
-            self._al.update(ev["c"], factor, o["rho_max"])
-            self._alN.update(ev["cN"], factor, o["rho_max"])
-            ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
+            if not rti or it == n_iter:
+                factor = 1.0 if rti else o["rho_factor"]
+                self._al.update(ev["c"], factor, o["rho_max"])
+                self._alN.update(ev["cN"], factor, o["rho_max"])
+                ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
             rec = {"iter": it, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
                    "violation": ev["viol"], **info}
             history.append(rec)
