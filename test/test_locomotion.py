@@ -128,3 +128,70 @@ def test_foot_radius_must_be_a_non_negative_number(tmp_path):
         load_robot_config(path)
     path.write_text("robot: go2\nfeet: [FL_foot]\n")
     assert load_robot_config(path).foot_radius == 0.0
+
+
+# ---------------------------------------------------------------------- the MPC's tick path
+@pytest.fixture(scope="module")
+def walking_mpc():
+    from horizon_mpc.mpc import WalkingMpc
+
+    return WalkingMpc("go2")
+
+
+def _perfect_model_ticks(mpc, commands):
+    """Tick ``mpc`` from standing with the state of its own plan's node 1 (a perfect model);
+    yields each plan after its tick."""
+    from horizon_mpc.posture import standing_configuration
+
+    _, q0 = standing_configuration(mpc.cfg)
+    mpc.t_last = None
+    plan = mpc.start(q0, np.zeros(mpc.model.nv), 0.0)
+    dt = mpc.settings.dt
+    for k, cmd in enumerate(commands, start=1):
+        plan = mpc.update(k * dt, plan.q[:, 1], plan.v[:, 1], np.asarray(cmd, float))
+        yield plan
+
+
+def _contact_masks(contacts):
+    return {f"{kind}/{foot}": term.active
+            for kind in ("velocity", "friction", "zero_force", "clearance")
+            for foot, term in getattr(contacts, kind).items()}
+
+
+def test_the_ticks_contact_terms_are_what_set_schedule_makes_of_the_plan_stance(walking_mpc):
+    """The tick skips unchanged node sets: on every tick (standing, starting, trotting,
+    stopping) the problem's contact terms and swing heights must be exactly what a full
+    ``set_schedule`` of that tick's stance gives."""
+    mpc = walking_mpc
+    wp = mpc.wp
+    commands = [(0, 0, 0)] * 5 + [(0.3, 0, 0)] * 25 + [(0, 0, 0)] * 25
+    swinging = []
+    for plan in _perfect_model_ticks(mpc, commands):
+        swinging.append(not plan.stance.all())
+        masks, swing_z = _contact_masks(wp.contacts), wp.contacts.swing_z.values
+        wp.contacts.set_schedule(plan.stance, swing_z)  # the unconditional path
+        again = _contact_masks(wp.contacts)
+        for name, mask in masks.items():
+            np.testing.assert_array_equal(mask, again[name], err_msg=name)
+        # and the stance column k is what the term masks say (k < N for the stage terms)
+        foot = wp.feet[0]
+        np.testing.assert_array_equal(masks[f"velocity/{foot}"], plan.stance[0])
+        np.testing.assert_array_equal(masks[f"zero_force/{foot}"][:-1], ~plan.stance[0, :-1])
+    # the sample covers standing (memo hits), trotting (new stance every tick), stopping
+    assert not any(swinging[:5]) and all(swinging[10:30]) and not swinging[-1]
+
+
+def test_the_plans_tau_head_is_the_full_horizon_inverse_dynamics_bit_for_bit(walking_mpc):
+    plan = next(_perfect_model_ticks(walking_mpc, [(0.3, 0.0, 0.0)]))
+    head = plan.tau_head(6)
+    assert head.shape == (walking_mpc.model.nv, 6)
+    full = walking_mpc.inverse_dynamics(plan.q[:, :-1], plan.v[:, :-1], plan.a, plan.f)
+    np.testing.assert_array_equal(head, full[:, :6])  # same compiled code per node
+    np.testing.assert_array_equal(plan.tau, full)
+
+
+def test_the_plans_stats_are_the_solver_stats_without_the_history(walking_mpc):
+    plan = next(_perfect_model_ticks(walking_mpc, [(0.0, 0.0, 0.0)]))
+    expected = walking_mpc.solver.stats.as_dict()
+    expected.pop("history")
+    assert plan.stats == expected

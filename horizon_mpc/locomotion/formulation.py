@@ -59,6 +59,12 @@ class ContactTerms:
 
         ``swing_z``: world height of each swinging foot per node (n_feet, N+1).
         """
+        self.set_stance(stance)
+        if swing_z is not None:
+            self.set_swing_height(swing_z)
+
+    def set_stance(self, stance: np.ndarray) -> None:
+        """The node sets of :meth:`set_schedule` only (``stance``: (n_feet, N+1) booleans)."""
         for i, foot in enumerate(self.velocity):
             st = np.asarray(stance[i], bool)
             n_last = st.size - 1
@@ -67,7 +73,11 @@ class ContactTerms:
             self.zero_force[foot].set_nodes(np.flatnonzero(~st[:n_last]))
             if foot in self.clearance:
                 self.clearance[foot].set_nodes(np.flatnonzero(~st))
-        if swing_z is not None and self.swing_z is not None:
+
+    def set_swing_height(self, swing_z: np.ndarray) -> None:
+        """World height (m) of each swinging foot per node, (n_feet, N+1); no-op without
+        clearance terms."""
+        if self.swing_z is not None:
             self.swing_z.assign(swing_z)
 
 

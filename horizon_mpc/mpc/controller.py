@@ -10,7 +10,8 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -20,18 +21,24 @@ from horizon_mpc.locomotion import MpcSettings, build_walking_problem, make_gait
 from horizon_mpc.model import RobotModel
 from horizon_mpc.mpc.schedule import GaitScheduler
 from horizon_mpc.solvers import make_solver
+from horizon_mpc.solvers.base import SolverStats
 
 __all__ = ["Plan", "WalkingMpc"]
 
 log = logging.getLogger(__name__)
 
 
+InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
 @dataclass
 class Plan:
     """A solution of the walking problem, from the state measured at time ``t0``.
 
-    Shapes: q (nq, N+1), v (nv, N+1), a (nv, N), f (3 n_feet, N), tau (nv, N) (inverse
-    dynamics of the plan; ``tau[6:]`` are the joint torques), stance (n_feet, N+1).
+    Shapes: q (nq, N+1), v (nv, N+1), a (nv, N), f (3 n_feet, N), stance (n_feet, N+1);
+    :attr:`tau` (nv, N) is the inverse dynamics of the plan (``tau[6:]`` the joint torques),
+    computed on first use by ``inverse_dynamics`` (q, v, a, f of n nodes -> (nv, n)):
+    a consumer of the first nodes only asks :meth:`tau_head` and pays for those nodes.
     """
 
     t0: float
@@ -40,14 +47,32 @@ class Plan:
     v: np.ndarray
     a: np.ndarray
     f: np.ndarray
-    tau: np.ndarray
     stance: np.ndarray
     stats: dict = field(default_factory=dict)
+    inverse_dynamics: InverseDynamics | None = field(default=None, repr=False, compare=False)
+    _tau: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def times(self) -> np.ndarray:
         """Node times relative to ``t0``, shape (N+1,)."""
         return self.dt * np.arange(self.q.shape[1])
+
+    @property
+    def tau(self) -> np.ndarray:
+        """Inverse dynamics of every stage node, shape (nv, N) (computed once, on first use)."""
+        if self._tau is None:
+            self._tau = self.tau_head(self.a.shape[1])
+        return self._tau
+
+    def tau_head(self, n: int) -> np.ndarray:
+        """``tau[:, :n]``, shape (nv, n), without computing the other nodes."""
+        if self._tau is not None:
+            return self._tau[:, :n]
+        if self.inverse_dynamics is None:
+            raise ValueError("this Plan has no inverse_dynamics to compute tau with")
+        n = min(int(n), self.a.shape[1])
+        return self.inverse_dynamics(self.q[:, :n], self.v[:, :n], self.a[:, :n],
+                                     self.f[:, :n])
 
 
 class WalkingMpc:
@@ -73,9 +98,10 @@ class WalkingMpc:
         self.solver = make_solver("ilqr", self.wp.prb, {
             "rti": True, "iterations_per_call": int(iterations),
             "rho_init": self.settings.rho_init})
-        # per tick: numpy in/out through preallocated buffers (no DM conversion)
-        self._id = BufferedFunction(
-            model.compile(model.inverse_dynamics(self.wp.feet).map(self.wp.n_nodes)))
+        # per tick: numpy in/out through preallocated buffers (no DM conversion); one mapped
+        # function per number of nodes asked for (the horizon, the node's published points)
+        self._id_maps: dict[int, BufferedFunction] = {}
+        self.prepare_inverse_dynamics(self.wp.n_nodes)
         self.build_time = time.perf_counter() - t
         g = self.settings.gait
         self.scheduler = GaitScheduler(make_gait(g.name, g.step_duration, g.step_height,
@@ -86,6 +112,7 @@ class WalkingMpc:
         self.t_last: float | None = None
         self.ground_z = np.zeros(len(self.wp.feet))
         self._standing: dict[str, np.ndarray] = {}
+        self._stance_set: np.ndarray | None = None  # the stance last given to the problem
         self.failures = 0
         self.divergence_threshold = 1e3  # constraint violation above which a tick has failed
 
@@ -114,6 +141,23 @@ class WalkingMpc:
         self._standing = {n: wp.prb.get_variable(n).initial_guess for n in ("q", "v", "a", "f")}
         self.t_last = t
         return self._plan(t)
+
+    def prepare_inverse_dynamics(self, n: int) -> None:
+        """Compile (or load from the cache) the ``n``-node inverse dynamics now, not in the
+        first tick that asks for ``n`` nodes (see :meth:`inverse_dynamics`)."""
+        n = int(n)
+        if n not in self._id_maps:
+            fn = self.model.inverse_dynamics(self.wp.feet).map(n)
+            self._id_maps[n] = BufferedFunction(self.model.compile(fn))
+
+    def inverse_dynamics(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                         f: np.ndarray) -> np.ndarray:
+        """Generalised forces ``tau`` (nv, n) of n nodes: q (nq, n), v and a (nv, n), foot
+        forces f (3 n_feet, n) in world axes; ``tau[:6]`` is the base wrench (zero for a
+        feasible plan). One compiled mapped call (compiled on the first use of each n)."""
+        n = q.shape[1]
+        self.prepare_inverse_dynamics(n)
+        return self._id_maps[n](q, v, a, f)[0].copy()
 
     # ------------------------------------------------------------------ tick
     def update(self, t: float, q: np.ndarray, v: np.ndarray,
@@ -218,17 +262,25 @@ class WalkingMpc:
             py = self.pose_ref[1] + k * (s * vx + c * vy)
         wp.pose_ref.assign(np.vstack([px, py, np.cos(yaw), np.sin(yaw)]))
         sched = self.scheduler.schedule(t, N, dt)
-        swing_z = self.ground_z[:, None] + sched.swing_height()
-        wp.contacts.set_schedule(sched.stance, swing_z)
+        self._set_stance(sched.stance)
+        wp.contacts.set_swing_height(self.ground_z[:, None] + sched.swing_height())
         self._stance = sched.stance
 
+    def _set_stance(self, stance: np.ndarray) -> None:
+        # the contact terms' node sets cost ~10 us each through the Problem API (16 for four
+        # feet): skip them when the stance did not change (standing). Shifts leave node sets
+        # alone and this controller is the only writer of its contact terms' nodes.
+        if self._stance_set is not None and np.array_equal(stance, self._stance_set):
+            return
+        self.wp.contacts.set_stance(stance)
+        self._stance_set = stance.copy()
+
     def _plan(self, t: float) -> Plan:
+        # tau is left to the consumer: the node needs the first few nodes only
         sol = self.solver.solution
-        tau = self._id(sol["q"][:, :-1], sol["v"][:, :-1], sol["a"], sol["f"])[0].copy()
-        stats = self.solver.stats.as_dict()
-        stats.pop("history", None)
         return Plan(t, self.settings.dt, sol["q"].copy(), sol["v"].copy(), sol["a"].copy(),
-                    sol["f"].copy(), tau, self._stance.copy(), stats)
+                    sol["f"].copy(), self._stance.copy(), _stats_dict(self.solver.stats),
+                    self.inverse_dynamics)
 
     # ------------------------------------------------------------------ live settings
     def set_gait(self, name: str, step_duration: float | None = None,
@@ -242,6 +294,14 @@ class WalkingMpc:
         self.scheduler.gait = make_gait(g.name, g.step_duration, g.step_height,
                                         None if name in ("stand",) else g.duty_factor,
                                         len(self.wp.feet))
+
+
+def _stats_dict(stats: SolverStats) -> dict:
+    """``stats.as_dict()`` without the iteration history (and without copying it)."""
+    out = {f.name: getattr(stats, f.name) for f in fields(stats)
+           if f.name not in ("history", "extra")}
+    out.update({k: dict(x) if isinstance(x, dict) else x for k, x in stats.extra.items()})
+    return out
 
 
 def _yaw(q: np.ndarray) -> float:
