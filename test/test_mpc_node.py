@@ -7,6 +7,8 @@ states are stamped with it.
 
 from __future__ import annotations
 
+import copy
+import itertools
 import math
 import os
 import signal
@@ -25,11 +27,13 @@ from nav_msgs.msg import Odometry, Path
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.time import Time as RosTime
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from horizon_mpc.mpc.controller import WalkingMpc
 from horizon_mpc.nodes.conversions import (
+    NS_PER_S,
     joint_state_to_msg,
     odometry_to_msg,
     seconds_from_duration,
@@ -246,6 +250,71 @@ def test_efforts_are_the_inverse_dynamics_of_the_plan(harness):
         np.testing.assert_allclose(pt.effort, tau[6:], atol=1e-8)
     # standing: the joints carry the robot's weight (not zero torques)
     assert np.max(np.abs(h.trajectories[-1].points[0].effort)) > 1.0
+
+
+class Sent:
+    """Stands in for a publisher: keeps copies of what was published (the node refills its
+    path and diagnostics messages in place)."""
+
+    def __init__(self) -> None:
+        self.msgs: list = []
+
+    def publish(self, msg: object) -> None:
+        self.msgs.append(copy.deepcopy(msg))
+
+
+def drive_in_sim_time(node: MpcNode, n_ticks: int, period_ns: int = 20_000_000) -> dict:
+    """Feed ``n_ticks`` standing states ``period_ns`` apart straight into the node's callbacks
+    on a sim clock that follows the stamps; returns what it published, by output."""
+    sent = {"traj": Sent(), "path": Sent(), "diag": Sent()}
+    node._pub_traj, node._pub_path, node._pub_diag = sent["traj"], sent["path"], sent["diag"]
+    _, q = standing_configuration(node.mpc.cfg)
+    zeros = np.zeros(3)
+    for k in range(n_ticks):
+        ns = 10 * NS_PER_S + k * period_ns
+        node.get_clock().set_ros_time_override(RosTime(nanoseconds=ns))
+        stamp = time_from_ns(ns)
+        node._on_joint_state(joint_state_to_msg(stamp, node.joint_names, q[7:],
+                                                np.zeros(len(q) - 7)))
+        node._on_odom(odometry_to_msg(stamp, q[:3], q[3:7], zeros, zeros))
+    return {k: s.msgs for k, s in sent.items()}
+
+
+def sim_time_node(context: rclpy.Context, mpc: WalkingMpc, **params: object) -> MpcNode:
+    mpc.t_last = None
+    overrides = {"trigger": "state", "use_sim_time": True, **params}
+    return MpcNode(parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
+                   mpc=mpc, context=context)
+
+
+def test_the_path_and_diagnostics_go_out_at_their_rates(context, walking_mpc):
+    node = sim_time_node(context, walking_mpc, path_rate=10.0, diagnostics_rate=5.0)
+    out = drive_in_sim_time(node, 21)  # 0.4 s of 50 Hz ticks
+    assert len(out["traj"]) == 21  # the trajectory: every tick
+    path_times = [time_to_ns(m.header.stamp) / NS_PER_S - 10.0 for m in out["path"]]
+    np.testing.assert_allclose(path_times, [0.0, 0.1, 0.2, 0.3, 0.4], atol=1e-9)
+    # the last path is the last plan's base poses, every node stamped at its time
+    path, plan = out["path"][-1], node.plan
+    assert len(path.poses) == plan.q.shape[1]
+    for k, ps in enumerate(path.poses):
+        p, o = ps.pose.position, ps.pose.orientation
+        np.testing.assert_array_equal([p.x, p.y, p.z, o.x, o.y, o.z, o.w], plan.q[:7, k])
+        assert time_to_ns(ps.header.stamp) == time_to_ns(path.header.stamp) + k * 20_000_000
+    # diagnostics: at 5 Hz, or at once when the level rises above the last one sent
+    sent = [(time_to_ns(m.header.stamp), m.status[0].level) for m in out["diag"]]
+    assert 3 <= len(sent) < 21
+    for (t0, level0), (t1, level1) in itertools.pairwise(sent):
+        assert t1 - t0 >= 0.18 * NS_PER_S or level1 > level0
+    node.destroy_node()
+
+
+def test_by_default_diagnostics_go_out_every_tick(context, walking_mpc):
+    node = sim_time_node(context, walking_mpc)
+    out = drive_in_sim_time(node, 4)
+    assert len(out["diag"]) == len(out["traj"]) == 4
+    values = {kv.key: kv.value for kv in out["diag"][-1].status[0].values}
+    assert int(values["ticks"]) == 4 and float(values["solve_time_max_ms"]) > 0.0
+    node.destroy_node()
 
 
 def test_a_stale_state_is_not_planned_from(harness):

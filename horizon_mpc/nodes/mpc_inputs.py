@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
 from geometry_msgs.msg import Twist
@@ -42,7 +43,8 @@ def command_from_twist(
     Raises:
         ValueError: a non-finite component, or one beyond :data:`ABSURD_COMMAND`.
     """
-    raw = np.array([msg.linear.x, msg.linear.y, msg.angular.z], dtype=float)
+    # three numbers: plain floats (numpy costs more than the work on arrays this small)
+    raw = (float(msg.linear.x), float(msg.linear.y), float(msg.angular.z))
     names = ("linear.x", "linear.y", "angular.z")
     bad = [f"{n}={x}" for n, x in zip(names, raw, strict=True) if not math.isfinite(x)]
     if bad:
@@ -52,14 +54,43 @@ def command_from_twist(
         raise ValueError(f"cmd_vel components {', '.join(absurd)} exceed the plausible "
                          f"{ABSURD_COMMAND:g} (m/s or rad/s)")
     notes = []
-    others = np.array([msg.linear.z, msg.angular.x, msg.angular.y], dtype=float)
-    if np.any(others != 0.0):
+    if msg.linear.z != 0.0 or msg.angular.x != 0.0 or msg.angular.y != 0.0:
         notes.append("cmd_vel linear.z/angular.x/angular.y are ignored (planar command)")
-    lim = np.abs(np.asarray(limits, dtype=float))
-    cmd = np.clip(raw, -lim, lim)
-    if np.any(cmd != raw):
-        notes.append(f"cmd_vel {raw.tolist()} clamped to the limits {lim.tolist()}")
-    return cmd, notes
+    lim = [abs(float(x)) for x in limits]
+    cmd = [min(max(x, -m), m) for x, m in zip(raw, lim, strict=True)]
+    if cmd != list(raw):
+        notes.append(f"cmd_vel {list(raw)} clamped to the limits {lim}")
+    return np.array(cmd), notes
+
+
+@lru_cache(maxsize=16)
+def _name_match(names: tuple[str, ...], joint_names: tuple[str, ...]) -> tuple[
+        np.ndarray, list[str]]:
+    """Indices of ``joint_names`` in ``names`` and the notes of that matching (cached: a
+    robot sends the same names in every message).
+
+    Raises:
+        ValueError: a missing or duplicated joint.
+    """
+    index: dict[str, int] = {}
+    duplicates = set()
+    for i, n in enumerate(names):
+        if n in index:
+            duplicates.add(n)
+        index[n] = i
+    missing = [n for n in joint_names if n not in index]
+    if missing:
+        raise ValueError(f"JointState lacks joints {missing}")
+    needed_duplicates = sorted(duplicates & set(joint_names))
+    if needed_duplicates:
+        raise ValueError(f"JointState names joints {needed_duplicates} more than once")
+    notes = []
+    extra = sorted(set(names) - set(joint_names))
+    if extra:
+        notes.append(f"JointState joints {extra} are not in the model; ignored")
+    idx = np.array([index[n] for n in joint_names], dtype=int)
+    idx.flags.writeable = False  # shared by every call with these names
+    return idx, notes
 
 
 def joints_from_joint_state(
@@ -74,40 +105,25 @@ def joints_from_joint_state(
         ValueError: a missing or duplicated joint, a position/velocity array whose length
             differs from ``msg.name``, or a non-finite position.
     """
-    names = list(msg.name)
-    index: dict[str, int] = {}
-    duplicates = set()
-    for i, n in enumerate(names):
-        if n in index:
-            duplicates.add(n)
-        index[n] = i
-    missing = [n for n in joint_names if n not in index]
-    if missing:
-        raise ValueError(f"JointState lacks joints {missing}")
-    needed_duplicates = sorted(duplicates & set(joint_names))
-    if needed_duplicates:
-        raise ValueError(f"JointState names joints {needed_duplicates} more than once")
+    names = tuple(msg.name)
+    idx, name_notes = _name_match(names, tuple(joint_names))
     pos = np.asarray(msg.position, dtype=float)
     vel = np.asarray(msg.velocity, dtype=float)
     if pos.shape != (len(names),):
         raise ValueError(f"JointState.position has {pos.size} values for {len(names)} names")
     if vel.size and vel.shape != (len(names),):
         raise ValueError(f"JointState.velocity has {vel.size} values for {len(names)} names")
-    idx = [index[n] for n in joint_names]
-    notes = []
-    extra = sorted(set(names) - set(joint_names))
-    if extra:
-        notes.append(f"JointState joints {extra} are not in the model; ignored")
+    notes = list(name_notes)
     qj = pos[idx]
-    bad = [n for n, x in zip(joint_names, qj, strict=True) if not math.isfinite(x)]
-    if bad:
+    if not np.all(np.isfinite(qj)):
+        bad = [n for n, x in zip(joint_names, qj, strict=True) if not math.isfinite(x)]
         raise ValueError(f"JointState has non-finite positions for {bad}")
     if not vel.size:
         notes.append("JointState has no velocities; using zeros")
         return qj, np.zeros(len(idx)), notes
     vj = vel[idx]
-    bad = [n for n, x in zip(joint_names, vj, strict=True) if not math.isfinite(x)]
-    if bad:
+    if not np.all(np.isfinite(vj)):
+        bad = [n for n, x in zip(joint_names, vj, strict=True) if not math.isfinite(x)]
         notes.append(f"JointState has non-finite velocities for {bad}; using zeros for those")
         vj = np.where(np.isfinite(vj), vj, 0.0)
     return qj, vj, notes
@@ -127,14 +143,12 @@ def base_from_odometry(
     """
     p, o = msg.pose.pose.position, msg.pose.pose.orientation
     lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
-    pos = np.array([p.x, p.y, p.z], dtype=float)
-    quat = np.array([o.x, o.y, o.z, o.w], dtype=float)
-    v_lin = np.array([lin.x, lin.y, lin.z], dtype=float)
-    v_ang = np.array([ang.x, ang.y, ang.z], dtype=float)
-    for what, arr in (("position", pos), ("orientation", quat), ("linear twist", v_lin),
-                      ("angular twist", v_ang)):
-        if not np.all(np.isfinite(arr)):
-            raise ValueError(f"Odometry {what} is not finite: {arr.tolist()}")
+    parts = (("position", [p.x, p.y, p.z]), ("orientation", [o.x, o.y, o.z, o.w]),
+             ("linear twist", [lin.x, lin.y, lin.z]), ("angular twist", [ang.x, ang.y, ang.z]))
+    for what, values in parts:
+        if not all(map(math.isfinite, values)):
+            raise ValueError(f"Odometry {what} is not finite: {[float(x) for x in values]}")
+    pos, quat, v_lin, v_ang = (np.array(values, dtype=float) for _, values in parts)
     scale = float(np.max(np.abs(quat)))  # normalise in two steps: |q|^2 may overflow
     if scale < 1e-6:
         raise ValueError(f"Odometry orientation is a zero quaternion {quat.tolist()}")

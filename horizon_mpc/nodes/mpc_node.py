@@ -10,6 +10,7 @@ mode needs; ``trigger: timer`` ticks at ``control_rate`` on the node's clock.
 
 from __future__ import annotations
 
+import array
 import dataclasses
 import math
 import sys
@@ -17,6 +18,7 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry, Path
@@ -107,7 +109,16 @@ class MpcNode(Node):
         self.state_timeout = self._p("state_timeout")
         self.cmd_timeout = self._p("cmd_timeout")
         self.publish_points = min(self._p("publish_points"), settings.n_nodes)
+        mpc.prepare_inverse_dynamics(self.publish_points)  # compiled now, not in a tick
         self.trigger = self._p("trigger")
+        # the predicted path and the diagnostics may go out at lower rates than the ticks
+        self._path_period_ns = _period_ns(self._p("path_rate"))
+        self._diag_period_ns = _period_ns(self._p("diagnostics_rate"))
+        self._last_path_ns: int | None = None
+        self._last_diag: tuple[int, bytes] | None = None  # (node clock ns, level) last sent
+        self._solve_time_max = 0.0  # s, over the ticks since the last diagnostics
+        self._path = Path()  # reused: its poses are overwritten in place (see path_msg)
+        self._diag = _DiagnosticsMessage(f"{self.get_name()}: walking MPC", mpc.cfg.name)
 
         # latest accepted inputs: (stamp ns, arrays...) / (receipt time s, cmd)
         self._joints: tuple[int, np.ndarray, np.ndarray] | None = None
@@ -176,7 +187,12 @@ class MpcNode(Node):
         d("state_timeout", 0.2, "no plan from a state older than this (s, node clock)",
           _range(0.001, 60))
         d("publish_points", 6, "trajectory points published per plan (nodes 0..n-1)",
-          irng=[IntegerRange(from_value=1, to_value=1000, step=1)])
+          irng=[IntegerRange(from_value=1, to_value=1000, step=1)], ro=True)
+        d("path_rate", 10.0, "~/predicted_base_path messages per second of the node clock "
+          "(at most one per tick; 0: every tick)", _range(0, 1000), ro=True)
+        d("diagnostics_rate", 0.0, "/diagnostics messages per second of the node clock (at "
+          "most one per tick, and at once when the level rises; 0: every tick)",
+          _range(0, 1000), ro=True)
         self._check_trigger(self._p("trigger"))
 
     @staticmethod
@@ -309,12 +325,13 @@ class MpcNode(Node):
         if stamp_ns == self._last_tick_stamp:
             return False
         t = stamp_ns / NS_PER_S
-        self.last_state_age = self.now() - t
+        now_ns = self.get_clock().now().nanoseconds
+        self.last_state_age = now_ns / NS_PER_S - t
         if self.last_state_age > self.state_timeout:
             self.stale_skips += 1
             self._warn("stale", f"the state is {self.last_state_age:.3f} s old (state_timeout "
                        f"{self.state_timeout:g} s); not planning")
-            self._publish_diagnostics(None, stamp_ns)
+            self._publish_diagnostics(None, stamp_ns, now_ns)
             return False
         _, qj, vj = self._joints
         _, pos, quat, lin, ang = self._base
@@ -342,41 +359,61 @@ class MpcNode(Node):
                        f"{self.period * 1e3:.1f} ms ({self.deadline_misses} misses)")
         self.plan = plan
         self.ticks += 1
-        self._pub_traj.publish(self.trajectory_msg(plan, stamp_ns))
-        self._pub_path.publish(self.path_msg(plan, stamp_ns))
-        self._publish_diagnostics(plan, stamp_ns)
+        self._publish_plan(plan, stamp_ns, now_ns)
         return True
 
     # ------------------------------------------------------------------ outputs
+    def _publish_plan(self, plan: Plan, stamp_ns: int, now_ns: int) -> None:
+        """The trajectory every tick; the path and diagnostics when their period is due."""
+        self._pub_traj.publish(self.trajectory_msg(plan, stamp_ns))
+        if _due(self._last_path_ns, self._path_period_ns, now_ns):
+            self._last_path_ns = now_ns
+            self._pub_path.publish(self.path_msg(plan, stamp_ns))
+        self._publish_diagnostics(plan, stamp_ns, now_ns)
+
     def trajectory_msg(self, plan: Plan, stamp_ns: int) -> JointTrajectory:
-        """The first ``publish_points`` nodes of ``plan`` (joints in model order)."""
+        """The first ``publish_points`` nodes of ``plan`` (joints in model order).
+
+        Efforts are ``plan.tau_head(n)``: the inverse dynamics of the published nodes only.
+        """
         msg = JointTrajectory()
         msg.header.stamp = time_from_ns(stamp_ns)
         msg.joint_names = self.joint_names
         n = min(self.publish_points, plan.a.shape[1])
-        q, v, a, tau = plan.q[7:, :n].T, plan.v[6:, :n].T, plan.a[6:, :n].T, plan.tau[6:, :n].T
+        # one C-ordered (4, n, nj) block: each point's field is a row, handed to the message
+        # as array.array (the fastest type rclpy accepts for sequence<double>)
+        rows = np.stack((plan.q[7:, :n].T, plan.v[6:, :n].T, plan.a[6:, :n].T,
+                         plan.tau_head(n)[6:].T))
+        points = []
         for k in range(n):
             pt = JointTrajectoryPoint()
-            pt.positions, pt.velocities = q[k].tolist(), v[k].tolist()
-            pt.accelerations, pt.effort = a[k].tolist(), tau[k].tolist()
+            pt.positions = array.array("d", rows[0, k].tobytes())
+            pt.velocities = array.array("d", rows[1, k].tobytes())
+            pt.accelerations = array.array("d", rows[2, k].tobytes())
+            pt.effort = array.array("d", rows[3, k].tobytes())
             pt.time_from_start = duration_from_seconds(k * plan.dt)
-            msg.points.append(pt)
+            points.append(pt)
+        msg.points = points
         return msg
 
     def path_msg(self, plan: Plan, stamp_ns: int) -> Path:
-        """The planned base poses of every node, frame ``odom``."""
-        msg = Path()
-        msg.header.stamp = time_from_ns(stamp_ns)
-        msg.header.frame_id = "odom"
-        for k in range(plan.q.shape[1]):
-            ps = PoseStamped()
-            ps.header.frame_id = "odom"
-            ps.header.stamp = time_from_ns(stamp_ns + round(k * plan.dt * NS_PER_S))
-            x, y, z, qx, qy, qz, qw = (float(c) for c in plan.q[:7, k])
-            ps.pose.position.x, ps.pose.position.y, ps.pose.position.z = x, y, z
-            o = ps.pose.orientation
-            o.x, o.y, o.z, o.w = qx, qy, qz, qw
-            msg.poses.append(ps)
+        """The planned base poses of every node, frame ``odom``.
+
+        Returns the node's one Path message, updated in place (building 41 poses anew costs
+        ~0.4 ms): it is overwritten by the next call, copy it to keep it.
+        """
+        msg = self._path
+        n = plan.q.shape[1]
+        if len(msg.poses) != n:
+            msg.header.frame_id = "odom"
+            msg.poses = [PoseStamped() for _ in range(n)]
+            for ps in msg.poses:
+                ps.header.frame_id = "odom"
+        _set_stamp(msg.header.stamp, stamp_ns)
+        for k, (ps, pose) in enumerate(zip(msg.poses, plan.q[:7].T.tolist(), strict=True)):
+            _set_stamp(ps.header.stamp, stamp_ns + round(k * plan.dt * NS_PER_S))
+            p, o = ps.pose.position, ps.pose.orientation
+            p.x, p.y, p.z, o.x, o.y, o.z, o.w = pose
         return msg
 
     def gait_phase(self, t: float) -> float:
@@ -387,19 +424,26 @@ class MpcNode(Node):
             return math.nan
         return ((t - sch.t_start) / period) % 1.0
 
-    def _publish_diagnostics(self, plan: Plan | None, stamp_ns: int) -> None:
-        status = DiagnosticStatus(name=f"{self.get_name()}: walking MPC",
-                                  hardware_id=self.mpc.cfg.name)
+    def _publish_diagnostics(self, plan: Plan | None, stamp_ns: int,
+                             now_ns: int | None = None) -> None:
+        """The node's status, when ``diagnostics_rate`` says so or its level rose."""
         if plan is None:
-            status.level, status.message = DiagnosticStatus.WARN, "stale state: not planning"
-            stats = {}
+            level, message, stats = DiagnosticStatus.WARN, "stale state: not planning", {}
         else:
             stats = plan.stats
             ok = bool(stats.get("success", True)) and self.mpc.failures == 0
-            status.level = DiagnosticStatus.OK if ok else DiagnosticStatus.WARN
-            status.message = "ok" if ok else f"solver: {stats.get('status')}"
+            level = DiagnosticStatus.OK if ok else DiagnosticStatus.WARN
+            message = "ok" if ok else f"solver: {stats.get('status')}"
+            self._solve_time_max = max(self._solve_time_max, self.last_solve_time)
+        now_ns = self.get_clock().now().nanoseconds if now_ns is None else now_ns
+        last = self._last_diag  # a rising level (OK -> WARN) goes out at once
+        if last is not None and level <= last[1] and not _due(last[0], self._diag_period_ns,
+                                                               now_ns):
+            return
+        self._last_diag = (now_ns, level)
         values = {
             "solve_time_ms": self.last_solve_time * 1e3,
+            "solve_time_max_ms": self._solve_time_max * 1e3,
             "iterations": stats.get("iterations", math.nan),
             "cost": stats.get("cost", math.nan),
             "constraint_violation": stats.get("constraint_violation", math.nan),
@@ -412,10 +456,40 @@ class MpcNode(Node):
             "stale_skips": self.stale_skips,
             "rejected": self.rejected,
         }
-        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = time_from_ns(stamp_ns)
-        self._pub_diag.publish(msg)
+        self._solve_time_max = 0.0
+        self._pub_diag.publish(self._diag.filled(stamp_ns, level, message, values))
+
+
+class _DiagnosticsMessage:
+    """The node's one DiagnosticArray, refilled in place for every publication."""
+
+    def __init__(self, name: str, hardware_id: str) -> None:
+        self.status = DiagnosticStatus(name=name, hardware_id=hardware_id)
+        self.msg = DiagnosticArray(status=[self.status])
+
+    def filled(self, stamp_ns: int, level: bytes, message: str,
+               values: dict[str, object]) -> DiagnosticArray:
+        """The message with these stamp, level, message and ``str()`` of each value."""
+        _set_stamp(self.msg.header.stamp, stamp_ns)
+        self.status.level, self.status.message = level, message
+        self.status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        return self.msg
+
+
+def _period_ns(rate: float) -> int:
+    """The period (ns) of a publication rate (Hz); 0 for every tick."""
+    return round(NS_PER_S / rate) if rate > 0 else 0
+
+
+def _due(last_ns: int | None, period_ns: int, now_ns: int) -> bool:
+    """Whether a publication with this period is due (ticks a tenth early still count:
+    a 10 Hz path is then every 5th tick at 50 Hz despite timer jitter)."""
+    return last_ns is None or now_ns - last_ns >= period_ns - period_ns // 10
+
+
+def _set_stamp(stamp: Time, ns: int) -> None:
+    """Set a ``builtin_interfaces/Time`` in place (as :func:`time_from_ns`, no new message)."""
+    stamp.sec, stamp.nanosec = divmod(int(ns), NS_PER_S)
 
 
 def with_sim_time_default(argv: Sequence[str]) -> list[str]:
