@@ -1,11 +1,13 @@
 """Benchmark of the MPC node in the closed loop (issues 8 and 9: tick times, tracking, RSS).
 
-For each robot, :func:`horizon_mpc.closed_loop.run` drives ``sim_node`` + ``mpc_node`` (one
-process, one single-threaded executor, everything through the ROS topics) in REAL-TIME mode
-(the sim runs free at realtime factor 1, the MPC ticks on its 50 Hz timer of the sim clock)
-on a short profile: stand 1 s, forward ``FORWARD[robot]`` m/s 4 s (0.3 for go2, 0.2 for
-solo12 and anymal_c), lateral 0.2 m/s 2 s, yaw 0.5 rad/s 2 s, stop 1 s. go2 also runs the
-same profile in LOCKSTEP mode (the sim waits for each answer): the tick time without
+For each robot, :func:`horizon_mpc.closed_loop.run` drives ``sim_node`` + ``mpc_node``
+(everything through the ROS topics) in REAL-TIME mode: ``mpc_node`` in a process of its own
+(timer trigger, 50 Hz on the sim clock), the simulator free at realtime factor 1 with the
+command player and the recorder in the run's process, so the two use the machine's two
+cores; on a short profile: stand 1 s, forward ``FORWARD[robot]`` m/s 4 s (0.3 for go2, 0.2
+for solo12 and anymal_c), lateral 0.2 m/s 2 s, yaw 0.5 rad/s 2 s, stop 1 s; ``--repeats N``
+runs each robot N times (falls are counted per robot out of N). go2 also runs the same
+profile in LOCKSTEP mode (one process; the sim waits for each answer): the tick time without
 real-time pressure, the deterministic reference.
 
 Recorded per run (``<out>/<run>/summary.json``, the closed-loop report's plots, and
@@ -17,20 +19,23 @@ Recorded per run (``<out>/<run>/summary.json``, the closed-loop report's plots, 
   which times ``WalkingMpc.update`` only; and in real time the control periods that got no
   tick at all), real-time factor (sim s / wall s), achieved control rate (ticks per sim s);
 * the per-tick breakdown, from wrappers monkeypatched around the node's methods for the run
-  (nothing in ``horizon_mpc/`` changes): state handling (message conversion in the
-  joint_states/odom callbacks since the previous tick + the tick's own state assembly) /
-  shift of the warm start (``solver.shift``) / references, command ramp and contact schedule
-  (the rest of ``WalkingMpc.update``) / ILQR (``solver.solve``, split by
-  ``solver.timings``: quadratise / backward / rollout / line_search / other) / plan
-  extraction (inverse dynamics of the plan, ``WalkingMpc._plan``) / publish (trajectory,
-  predicted path, diagnostics);
-* where the wall time of the executor thread went per sim second (simulator callbacks, MPC
-  ticks, MPC input callbacks, the rest: executor overhead, the run loop's recording and idle waits);
+  (nothing in ``horizon_mpc/`` changes; in real time they are installed in the MPC process,
+  which this script then runs as ``--mpc-probe FILE``, and come back in FILE): state
+  handling (message conversion in the joint_states/odom callbacks since the previous tick +
+  the tick's own state assembly) / shift of the warm start (``solver.shift``) / references,
+  command ramp and contact schedule (the rest of ``WalkingMpc.update``) / ILQR
+  (``solver.solve``, split by ``solver.timings``: quadratise / backward / rollout /
+  line_search / other) / plan extraction (inverse dynamics of the plan,
+  ``WalkingMpc._plan``) / publish (trajectory, predicted path, diagnostics);
+* where the wall time went per sim second (simulator callbacks, MPC ticks, MPC input
+  callbacks, the rest; in real time, the two processes' CPU time too);
+* plan age: the simulator's time when a plan arrives minus the stamp of the state it was
+  planned from (``closed_loop``'s recorder; 0 in lockstep), and the node's ``state_age``;
 * tracking RMSE and mean velocity per segment (``closed_loop_report.summarise``: 1 s of
   settling), pooled RMSE per axis, falls;
-* memory: peak and current RSS of the process after the run (``/proc/self/status``,
-  ``ru_maxrss``) and the RSS the MPC node's construction added (sim, MPC and rclpy share the
-  process: the peak is the whole closed loop's);
+* memory: peak and current RSS of the MPC node's process (real time: the ``mpc_node``
+  process, from ``/proc/<pid>/status`` at the end of the run; lockstep: the one process of
+  sim, MPC and rclpy) and the RSS the MPC node's construction added;
 * load average (``os.getloadavg``) before and after, and whether a pytest run was going.
 
 By default each run is a subprocess of its own (``--no-isolate``: all in this process), so
@@ -49,7 +54,8 @@ Diagnostics: ``--realtime-factor F`` and ``--state-rate HZ`` override sim_node's
 in the real-time runs (e.g. a slower simulator gives the MPC more wall time per period).
 
 Run: ``python bench/bench_closed_loop.py [--robots go2 solo12 anymal_c] [--duration S]
-[--out bench/results/closed_loop] [--mode realtime|lockstep] [--no-gif] [--peer]``.
+[--repeats N] [--out bench/results/closed_loop] [--mode realtime|lockstep] [--no-gif]
+[--peer]``.
 """
 
 from __future__ import annotations
@@ -68,6 +74,7 @@ import random  # noqa: E402
 import resource  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable, Sequence  # noqa: E402
 from contextlib import contextmanager  # noqa: E402
@@ -82,8 +89,8 @@ for _p in (ROOT, ROOT / "bench"):  # source checkout without an install; bench_i
 
 import bench_ilqr  # noqa: E402
 
-from horizon_mpc.closed_loop import Recording, Segment, run  # noqa: E402
-from horizon_mpc.closed_loop_report import FRAME_PERIOD, summarise, write_report  # noqa: E402
+from horizon_mpc.closed_loop import Segment, run  # noqa: E402
+from horizon_mpc.closed_loop_report import render_replay, summarise, write_report  # noqa: E402
 from horizon_mpc.mpc.controller import WalkingMpc  # noqa: E402
 from horizon_mpc.nodes import mpc_node as mpc_node_module  # noqa: E402
 from horizon_mpc.nodes.mpc_node import MpcNode  # noqa: E402
@@ -148,6 +155,19 @@ class Probe:
         self._conv = 0.0  # s of message conversion since the last tick
         self._tick_wall = 0.0  # s of tick time, for callbacks that tick inside (lockstep)
         self._cur: dict | None = None
+
+    def export(self) -> dict:
+        """The MPC-side figures, JSON-ready (written by the MPC process of a real-time run)."""
+        return {"rows": self.rows, "bootstrap_ms": self.bootstrap_ms, "period": self.period,
+                "wall": {k: self.wall[k] for k in ("mpc_tick", "mpc_inputs")},
+                "rss_build": self.rss_build, "messages": self.messages}
+
+    def absorb(self, data: dict) -> None:
+        """Take the MPC-side figures :meth:`export` wrote in the MPC process."""
+        self.rows = list(data["rows"])
+        self.bootstrap_ms, self.period = data["bootstrap_ms"], data["period"]
+        self.wall.update(data["wall"])
+        self.rss_build, self.messages = dict(data["rss_build"]), dict(data["messages"])
 
     @contextmanager
     def installed(self):
@@ -399,29 +419,14 @@ def _ancestors() -> set[int]:
 
 
 def distribution(x: Sequence[float]) -> dict[str, float]:
-    """median, p95, p99, max, mean, min of ``x`` (NaN when empty)."""
+    """median, p95, p99, max, mean, min of the finite values of ``x`` (NaN when none)."""
     a = np.asarray(x, dtype=float)
+    a = a[np.isfinite(a)]
     if a.size == 0:
         return dict.fromkeys(("median", "p95", "p99", "max", "mean", "min"), math.nan)
     return {"median": float(np.median(a)), "p95": float(np.percentile(a, 95)),
             "p99": float(np.percentile(a, 99)), "max": float(a.max()),
             "mean": float(a.mean()), "min": float(a.min())}
-
-
-def replay_frames(robot: str, rec: Recording) -> list[np.ndarray]:
-    """GIF frames of a finished run: the recorded base poses and joints replayed into a fresh
-    simulator and rendered every ``FRAME_PERIOD`` of sim time (as the run loop would)."""
-    from horizon_mpc.sim import Simulator
-
-    t = np.asarray(rec.t)
-    if t.size == 0:
-        return []
-    frames = []
-    with Simulator(robot) as sim:
-        for tf in np.arange(t[0], t[-1] + 1e-9, FRAME_PERIOD):
-            sim.set_state(rec.q[int(np.argmin(np.abs(t - tf)))])
-            frames.append(sim.render())
-    return frames
 
 
 def tick_summary(probe: Probe, sim_time: float, node_misses: int,
@@ -465,9 +470,12 @@ def tick_summary(probe: Probe, sim_time: float, node_misses: int,
         "shifts_per_tick": float(np.mean(col["shifts"])) if n else math.nan,
         "state_age_ms": distribution(col.get("state_age", [])),
         "state_lag_ms": distribution(col.get("state_lag", [])),
+        "plan_age_ms": distribution(col.get("plan_age", [])),
         "state_note": "state_age: the node's own figure (its clock, from /clock, minus the "
-                      "state's stamp); state_lag: the simulator's time at the tick minus the "
-                      "stamp of the state the tick plans from (how old the state really is)",
+                      "state's stamp); state_lag (lockstep only, one process): the "
+                      "simulator's time at the tick minus the stamp of the state the tick "
+                      "plans from; plan_age: the simulator's time when the plan arrived minus "
+                      "that stamp (the loop's delay)",
         "messages": dict(probe.messages),
         "deadline_misses": {
             "count": int(misses), "percent": 100.0 * misses / n if n else math.nan,
@@ -502,27 +510,56 @@ def measure(robot: str, mode: str = "realtime", duration: float | None = None,
     """One closed-loop run with the probes installed; returns (and writes into ``out``, with
     the report's plots) the closed-loop summary plus a ``bench`` section.
 
-    ``sim_parameters``: SimNode parameters overriding the closed loop's (diagnostics).
+    ``sim_parameters``: SimNode parameters overriding the closed loop's (diagnostics). In
+    real time the MPC-side probes run in the MPC process (:func:`mpc_probe_main`).
     """
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 101)))
     segments = profile(robot)
     load0 = machine_load()
     probe = Probe(sim_parameters)
-    t0 = time.perf_counter()
-    with probe.installed():
-        rec = run(robot, segments, duration, mode, gif=False, iterations=iterations)
-    run_wall = time.perf_counter() - t0
-    memory = rss_mb()
+    realtime = mode == "realtime"
+    with tempfile.TemporaryDirectory(prefix="bench_closed_loop_") as tmp:
+        child_figures = Path(tmp) / "mpc_probe.json"
+        command = [sys.executable, str(Path(__file__).resolve()), "--mpc-probe",
+                   str(child_figures)] if realtime else None
+        t0 = time.perf_counter()
+        with probe.installed():
+            rec = run(robot, segments, duration, mode, gif=False, iterations=iterations,
+                      mpc_command=command)
+        run_wall = time.perf_counter() - t0
+        if realtime:
+            if not child_figures.exists():
+                raise RuntimeError(f"the MPC process wrote no figures; its output ends with:\n"
+                                   f"{rec.mpc_log}")
+            probe.absorb(json.loads(child_figures.read_text()))
     load1 = machine_load()
     summary = summarise(rec, segments, mode=mode, robot=robot)
-    falls = summary["falls"]["times"]
-    rtf = (sim_parameters or {}).get("realtime_factor", 1.0) if mode == "realtime" else 1.0
-    ticks = tick_summary(probe, summary["sim_time"], rec.deadline_misses,
-                         falls[0] if falls else None, rtf)
-    wall = rec.wall_time
     sim_time = summary["sim_time"]
-    budget = {k: v / sim_time if sim_time > 0 else math.nan for k, v in probe.wall.items()}
-    budget["rest"] = (wall - sum(probe.wall.values())) / sim_time if sim_time > 0 else math.nan
+    if len(rec.t):  # the MPC process ticks during the hold before the clock runs, too
+        probe.rows = [r for r in probe.rows if rec.t[0] - 1e-9 <= r["t"] <= rec.t[-1] + 1e-9]
+    age = dict(zip(np.round(rec.plan_t, 6), rec.plan_age, strict=True))
+    for row in probe.rows:
+        row["plan_age"] = age.get(round(row["t"], 6), math.nan) * 1e3
+    falls = summary["falls"]["times"]
+    rtf = (sim_parameters or {}).get("realtime_factor", 1.0) if realtime else 1.0
+    ticks = tick_summary(probe, sim_time, rec.deadline_misses, falls[0] if falls else None,
+                         rtf)
+
+    def per_sim_s(x: float) -> float:
+        return x / sim_time if sim_time > 0 else math.nan
+
+    budget = {k: per_sim_s(v) for k, v in probe.wall.items()}
+    if realtime:
+        proc = rec.mpc_process
+        budget["rest"] = per_sim_s(rec.wall_time - probe.wall["mpc_tick"]
+                                   - probe.wall["mpc_inputs"])
+        budget["cpu_mpc_process"] = per_sim_s(proc["cpu_s"])
+        budget["cpu_sim_process"] = per_sim_s(proc["sim_process_cpu_s"])
+        memory = {**proc["memory_mb"], "process": "mpc_node (its own process)",
+                  "sim_process": rss_mb()}
+    else:
+        budget["rest"] = per_sim_s(rec.wall_time - sum(probe.wall.values()))
+        memory = {**rss_mb(), "process": "the closed loop (sim, MPC and rclpy in one)"}
     summary["bench"] = {
         "mode": mode,
         "iterations_per_tick_setting": iterations,
@@ -531,10 +568,7 @@ def measure(robot: str, mode: str = "realtime", duration: float | None = None,
         "ticks": ticks,
         "tracking_rmse_pooled": pooled_rmse(summary["segments"]),
         "wall_s_per_sim_s": budget,
-        "wall_s_per_sim_s_note": "executor thread: sim = SimNode timer/trajectory callbacks "
-                                 "(physics + state publishing), mpc_tick = MpcNode.tick, "
-                                 "mpc_inputs = its joint_states/odom/cmd_vel callbacks, rest = "
-                                 "executor overhead + the run loop's recording + idle waits",
+        "wall_s_per_sim_s_note": BUDGET_NOTES[mode],
         "memory_mb": {**memory, "mpc_node_construction": probe.rss_build.get("after_mb", math.nan)
                       - probe.rss_build.get("before_mb", math.nan),
                       "before_mpc_node": probe.rss_build.get("before_mb", math.nan)},
@@ -544,11 +578,32 @@ def measure(robot: str, mode: str = "realtime", duration: float | None = None,
     if out is not None:
         out = Path(out)
         if gif:
-            rec.frames = replay_frames(robot, rec)
+            rec.frames = render_replay(robot, rec.t, rec.q)
         write_report(rec, bench_ilqr.jsonable(summary), out)  # summary.json: strict JSON
         plot_ticks(probe.rows, probe.period, out / "tick_breakdown.png", f"{robot}, {mode}")
         write_rows(probe.rows, out / "ticks.csv")
     return summary
+
+
+BUDGET_NOTES = {
+    "lockstep": "one executor thread: sim = SimNode timer/trajectory callbacks (physics + state "
+                "publishing), mpc_tick = MpcNode.tick, mpc_inputs = its joint_states/odom/"
+                "cmd_vel callbacks, rest = executor overhead + the run loop's recording + idle",
+    "realtime": "two processes: sim = SimNode callbacks (the run's process); mpc_tick, "
+                "mpc_inputs = MpcNode.tick and its input callbacks (the MPC process), rest = "
+                "the MPC process's executor overhead and idle time; cpu_* = CPU s (user + "
+                "system) of each process per sim s",
+}
+
+
+def mpc_probe_main(path: Path, ros_args: Sequence[str]) -> int:
+    """The MPC process of a real-time run with the probes installed: ``mpc_node`` until
+    SIGINT/SIGTERM, then the probe's figures (:meth:`Probe.export`) written to ``path``."""
+    probe = Probe()
+    with probe.installed():
+        code = mpc_node_module.main(["mpc_node", *ros_args])
+    path.write_text(json.dumps(probe.export()))
+    return code
 
 
 def write_rows(rows: list[dict], path: Path) -> None:
@@ -627,6 +682,11 @@ def compact(name: str, summary: dict) -> dict:
         "bootstrap_ms": t["bootstrap_ms"],
         "deadline_misses": t["deadline_misses"],
         "control_periods": t["control_periods"],
+        "plan_age_ms": t["plan_age_ms"],
+        "state_age_ms": t["state_age_ms"],
+        "diagnostics": {k: summary.get(k) for k in (
+            "ticks_per_sim_second", "periods_without_tick_percent", "tick_time_ms",
+            "deadline_misses", "deadline_miss_percent", "plan_age_ms")},
         "breakdown_ms_mean": t["breakdown_ms_mean"],
         "iterations_per_tick": t["iterations_per_tick"],
         "wall_s_per_sim_s": b["wall_s_per_sim_s"],
@@ -688,14 +748,38 @@ def aggregate(runs: dict[str, dict], croc: dict, args: argparse.Namespace,
                     "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
                     "load": load},
         "settings": {"robots": args.robots, "mode": args.mode, "duration": args.duration,
+                     "repeats": args.repeats,
                      "reference": f"{REFERENCE_ROBOT} lockstep" if args.reference else None,
                      "isolated_processes": args.isolate, "iterations": args.iterations,
                      "sim_parameters_realtime": sim_parameters(args, "realtime")},
         "crocoddyl": croc,
         "targets": TARGETS,
+        "per_robot": per_robot(compacts),
         "runs": compacts,
         "status": {name: targets_status(c, croc) for name, c in compacts.items()},
     }
+
+
+def per_robot(compacts: dict[str, dict]) -> dict[str, dict]:
+    """Per (robot, mode): how many runs fell, and each run's headline figures, in order."""
+    out: dict[str, dict] = {}
+    for r in compacts.values():
+        key = r["robot"] if r["mode"] == "realtime" else f"{r['robot']}_{r['mode']}"
+        entry = out.setdefault(key, {"runs": 0, "runs_with_falls": 0, "first_fall_s": [],
+                                     "ticks_per_sim_s": [], "tick_ms_median": [],
+                                     "tick_ms_p99": [], "plan_age_ms_median": [],
+                                     "deadline_miss_percent": [], "rmse_pooled": []})
+        entry["runs"] += 1
+        falls = r["falls"]["times"]
+        entry["runs_with_falls"] += bool(falls)
+        entry["first_fall_s"].append(falls[0] if falls else None)
+        entry["ticks_per_sim_s"].append(r["control_periods"]["rate_hz"])
+        entry["tick_ms_median"].append(r["tick_ms"]["median"])
+        entry["tick_ms_p99"].append(r["tick_ms"]["p99"])
+        entry["plan_age_ms_median"].append(r["plan_age_ms"]["median"])
+        entry["deadline_miss_percent"].append(r["deadline_misses"]["percent"])
+        entry["rmse_pooled"].append(r["tracking_rmse_pooled"])
+    return out
 
 
 def _f(x: float | None, fmt: str = ".1f") -> str:
@@ -706,7 +790,7 @@ def _f(x: float | None, fmt: str = ".1f") -> str:
 def table(agg: dict) -> str:
     """The aggregate as text tables."""
     lines = ["run | ticks | tick ms median/p95/p99/max (CPU median/p99) | p99/med | misses "
-             "(%) | ticks/sim s | RTF | RSS MB peak | falls"]
+             "(%) | ticks/sim s | plan age ms median/p95 | RTF | RSS MB peak | falls"]
     for name, r in agg["runs"].items():
         t, d = r["tick_ms"], r["deadline_misses"]
         lines.append(
@@ -714,7 +798,8 @@ def table(agg: dict) -> str:
             f"{_f(t['p99'])}/{_f(t['max'])} ({_f(r['tick_cpu_ms']['median'])}/"
             f"{_f(r['tick_cpu_ms']['p99'])}) | "
             f"{_f(r['p99_over_median'], '.2f')} | {d['count']} ({_f(d['percent'])}) | "
-            f"{_f(r['control_periods']['rate_hz'])} | {_f(r['real_time_factor'], '.2f')} | "
+            f"{_f(r['control_periods']['rate_hz'])} | {_f(r['plan_age_ms']['median'])}/"
+            f"{_f(r['plan_age_ms']['p95'])} | {_f(r['real_time_factor'], '.2f')} | "
             f"{_f(r['memory_mb']['peak'], '.0f')} | {r['falls']['count']} "
             f"{[round(x, 2) for x in r['falls']['times']]}")
     lines.append("")
@@ -751,6 +836,11 @@ def table(agg: dict) -> str:
         p = r["tracking_rmse_pooled"]
         lines.append(f"{name} | " + "; ".join(parts)
                      + f" | {_f(p['vx'], '.3f')} / {_f(p['vy'], '.3f')} / {_f(p['wz'], '.3f')}")
+    lines.append("")
+    for key, e in agg.get("per_robot", {}).items():
+        lines.append(f"{key}: fell in {e['runs_with_falls']} of {e['runs']} runs "
+                     f"(first falls {e['first_fall_s']}); ticks/sim s "
+                     + ", ".join(_f(x) for x in e["ticks_per_sim_s"]))
     croc = agg["crocoddyl"]
     lines.append("")
     if croc.get("ms_per_iteration"):
@@ -813,7 +903,7 @@ def plot_aggregate(agg: dict, path: Path) -> None:
     runs = agg["runs"]
     parts = ("state", "shift", "references", *TIMING_KEYS, "ilqr_other", "plan", "publish")
     colors = plt.get_cmap("tab10").colors
-    fig, ax = plt.subplots(figsize=(8, 4.8))
+    fig, ax = plt.subplots(figsize=(max(8.0, 0.7 * len(runs)), 4.8))
     for i, r in enumerate(runs.values()):
         bottom = 0.0
         for j, k in enumerate(parts):
@@ -879,6 +969,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
                     help="write run.gif per robot (rendered after the run, from its states)")
     ap.add_argument("--iterations", type=int, default=1, help="ILQR iterations per tick")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="real-time runs per robot (robots interleaved; GIF of the first only)")
     ap.add_argument("--isolate", action=argparse.BooleanOptionalAction, default=True,
                     help="one subprocess per run (peak RSS per run)")
     ap.add_argument("--realtime-factor", type=float, default=None,
@@ -895,8 +987,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 
 def plan_runs(args: argparse.Namespace) -> list[tuple[str, str, str, bool]]:
-    """(run name, robot, mode, gif) of every measurement."""
-    runs = [(robot, robot, args.mode, args.gif) for robot in args.robots]
+    """(run name, robot, mode, gif) of every measurement: ``--repeats`` rounds over the
+    robots (``go2``, then ``go2_r2``, ...), then the lockstep reference."""
+    runs = [(robot if k == 1 else f"{robot}_r{k}", robot, args.mode, args.gif and k == 1)
+            for k in range(1, max(1, args.repeats) + 1) for robot in args.robots]
     if args.reference:
         runs.append((f"{REFERENCE_ROBOT}_lockstep", REFERENCE_ROBOT, "lockstep", False))
     return runs
@@ -904,6 +998,9 @@ def plan_runs(args: argparse.Namespace) -> list[tuple[str, str, str, bool]]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Measure, write the per-run folders and the aggregate, print the table."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["--mpc-probe"]:  # the MPC process of a real-time measurement
+        return mpc_probe_main(Path(argv[1]), argv[2:])
     args = parse_args(argv)
     if args.worker:  # one measurement, written into --out
         measure(args.robots[0], args.mode, args.duration, args.gif, args.out, args.iterations,

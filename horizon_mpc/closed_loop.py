@@ -1,11 +1,15 @@
-"""``python -m horizon_mpc.closed_loop``: simulator node + MPC node, one process, ROS in the loop.
+"""``python -m horizon_mpc.closed_loop``: simulator node + MPC node, ROS in the loop.
 
-Both nodes and a command player share one rclpy context and one single-threaded executor.
-In ``lockstep`` mode the loop is paced by the messages themselves: the simulator publishes a
-state, the MPC node (``trigger: state``) answers with a trajectory stamped like that state,
-the simulator advances one control period and publishes the next state. ``realtime`` mode
-runs the simulator free at realtime factor 1 and the MPC on its timer (sim clock). See
-``doc/closed_loop.md`` for the outputs (summary.json, plots, GIF).
+``lockstep`` mode: both nodes and a command player share one rclpy context and one
+single-threaded executor, and the loop is paced by the messages themselves: the simulator
+publishes a state, the MPC node (``trigger: state``) answers with a trajectory stamped like
+that state, the simulator advances one control period and publishes the next state.
+
+``realtime`` mode: the MPC node runs in a process of its own (``mpc_node``, timer trigger on
+the sim clock; :mod:`horizon_mpc.nodes.mpc_process`) so that it and the simulator, free at
+realtime factor 1 in this process with the command player and the recorder, use two cores.
+The tick statistics come from the MPC's ``/diagnostics``, the plans' age from its
+``joint_trajectory``. See ``doc/closed_loop.md`` for the outputs (summary.json, plots, GIF).
 """
 
 from __future__ import annotations
@@ -13,9 +17,10 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,16 +31,34 @@ from geometry_msgs.msg import Twist
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.utilities import remove_ros_args
 
+from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen, render_replay
+from horizon_mpc.config import load_robot_config
+from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.nodes.mpc_node import MpcNode
+from horizon_mpc.nodes.mpc_process import (
+    MpcMonitor,
+    MpcProcess,
+    MpcProcessError,
+    TickRecord,
+    process_cpu_seconds,
+    process_memory_mb,
+    wait_until,
+)
 from horizon_mpc.nodes.sim_node import SimNode
 
-__all__ = ["Push", "Recording", "Segment", "load_profile", "load_pushes", "main", "run"]
+__all__ = ["Push", "Recording", "Segment", "control_period", "load_profile", "load_pushes",
+           "main", "run"]
 
 log = logging.getLogger(__name__)
 
 DEFAULT_PROFILE = Path(__file__).resolve().parent.parent / "config" / "commands" / "default.yaml"
+#: s (wall) to wait for the MPC process to connect, and again for its first plan
+READY_TIMEOUT = 120.0
+#: s (wall) per control period while the simulator holds for the MPC's first plan
+HOLD_PERIOD = 0.25
 
 
 @dataclass
@@ -121,49 +144,117 @@ class Recording:
     tick_t: list[float] = field(default_factory=list)  # state time of each MPC tick
     tick_time: list[float] = field(default_factory=list)  # wall s of each tick's solve
     tick_iterations: list[float] = field(default_factory=list)
+    plan_t: list[float] = field(default_factory=list)  # stamp of each plan the sim got
+    plan_age: list[float] = field(default_factory=list)  # sim time at receipt - stamp (s)
     frames: list[np.ndarray] = field(default_factory=list)
     feet: list[str] = field(default_factory=list)
     wall_time: float = 0.0
-    deadline_misses: int = 0
+    deadline_misses: int = 0  # the MPC node's count (solve longer than the period)
+    stale_skips: int = 0  # ticks the MPC node skipped: state older than its state_timeout
     nominal_height: float = math.nan
-    build_time: float = math.nan
+    build_time: float = math.nan  # s (wall) until the MPC could tick (realtime: 1st plan)
+    mpc_process: dict = field(default_factory=dict)  # realtime: pid, memory, CPU, exit code
+    mpc_log: str = ""  # realtime: the end of the MPC process's output
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The per-period lists as arrays (rows = time)."""
         names = ("t", "q", "v", "cmd", "cmd_mpc", "contact", "tick_t", "tick_time",
-                 "tick_iterations")
+                 "tick_iterations", "plan_t", "plan_age")
         return {n: np.asarray(getattr(self, n)) for n in names}
 
 
 def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         duration: float | None = None, mode: str = "lockstep", gif: bool = True,
         iterations: int = 1, stop_after_fall: float = 1.0,
-        pushes: Sequence[Push] = ()) -> Recording:
+        pushes: Sequence[Push] = (), *, domain_id: int | None = None,
+        mpc_parameters: Mapping[str, object] | None = None,
+        mpc_command: Sequence[str] | None = None,
+        ready_timeout: float = READY_TIMEOUT) -> Recording:
     """Run the closed loop; returns the recording (see :func:`summarise` for the metrics).
 
     ``pushes`` are applied to the simulated base (ground truth, not through ROS).
-    """
-    from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen
 
+    Real-time mode only (``doc/closed_loop.md``): ``domain_id`` is the ``ROS_DOMAIN_ID`` of
+    the run (default: the environment's, else a private one derived from this process id,
+    :func:`~horizon_mpc.nodes.mpc_process.default_domain_id`); ``mpc_parameters`` are
+    more ``mpc_node`` parameters; ``mpc_command`` replaces ``python -m
+    horizon_mpc.nodes.mpc_node`` as the MPC process's program (a benchmark's wrapper);
+    ``ready_timeout`` (s, wall) bounds the wait for the MPC process's readiness and for its
+    first plan. Raises :class:`~horizon_mpc.nodes.mpc_process.MpcProcessError` (with the end
+    of its output) when the MPC process exits or is not ready in time.
+    """
     segments = list(segments or load_profile(DEFAULT_PROFILE))
     if duration is None:
         duration = sum(s.duration for s in segments)
     if mode not in ("lockstep", "realtime"):
         raise ValueError(f"mode must be 'lockstep' or 'realtime', got {mode!r}")
-    lockstep = mode == "lockstep"
+    load_robot_config(robot)  # an unknown robot fails here, before any node or process
+    loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
+    if mode == "lockstep":
+        return _run_lockstep(robot, iterations, loop)
+    return _run_realtime(robot, iterations, loop, domain_id, mpc_parameters, mpc_command,
+                         ready_timeout)
+
+
+@dataclass
+class _Loop:
+    """What both modes do once per control period: pushes, the command for the next
+    period, the recording, the fall check and the end of the run."""
+
+    segments: list[Segment]
+    duration: float
+    gif: bool
+    stop_after_fall: float
+    pushes: Sequence[Push]
+    rec: Recording = field(default_factory=Recording)
+    fell_at: float | None = None
+    next_frame: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.pending = sorted(self.pushes, key=lambda p: p.time)
+
+    def period(self, sim: SimNode, t: float, dt: float, pub_cmd: Publisher,
+               cmd_mpc: np.ndarray, render: bool) -> bool:
+        """Record the control period at sim time ``t``; returns whether the run is over."""
+        rec = self.rec
+        while self.pending and t >= self.pending[0].time - 1e-9:
+            push = self.pending.pop(0)
+            sim.sim.push(sim.sim.cfg.base_link, push.force, duration=push.duration)
+            log.info("push %s N for %.2f s at t = %.2f s", push.force, push.duration, t)
+        st = sim.sim.state()
+        cmd_next = command_at(self.segments, t + dt)  # heard before the next state's tick
+        pub_cmd.publish(_twist(cmd_next))
+        rec.t.append(t)
+        rec.q.append(st.q)
+        rec.v.append(st.v)
+        rec.cmd.append(command_at(self.segments, t))
+        rec.cmd_mpc.append(np.array(cmd_mpc, dtype=float))
+        rec.contact.append(st.foot_contact.copy())
+        if render and self.gif and t >= self.next_frame - 1e-9:
+            rec.frames.append(sim.sim.render())
+            self.next_frame += FRAME_PERIOD
+        if self.fell_at is None and fallen(st.q, rec.nominal_height):
+            self.fell_at = t
+            log.warning("the robot fell at t = %.2f s", t)
+        return t >= self.duration - 1e-9 or (
+            self.fell_at is not None and t - self.fell_at >= self.stop_after_fall)
+
+
+def _run_lockstep(robot: str, iterations: int, loop: _Loop) -> Recording:
+    """One process, one executor: the simulator waits for each plan (deterministic)."""
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
-    rec = Recording()
+    rec = loop.rec
     try:
         t_build = time.perf_counter()
         mpc = MpcNode(context=ctx, parameter_overrides=[
             Parameter("robot", value=robot), Parameter("use_sim_time", value=True),
-            Parameter("trigger", value="state" if lockstep else "timer"),
+            Parameter("trigger", value="state"),
             Parameter("iterations", value=int(iterations))])
         rec.build_time = time.perf_counter() - t_build
         dt = mpc.mpc.settings.dt
         sim = SimNode(context=ctx, parameter_overrides=[
-            Parameter("robot", value=robot), Parameter("lockstep", value=lockstep),
+            Parameter("robot", value=robot), Parameter("lockstep", value=True),
             Parameter("control_period", value=dt), Parameter("lockstep_timeout", value=10.0),
             Parameter("realtime_factor", value=1.0)])
         player = Node("command_player", context=ctx)
@@ -175,10 +266,9 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         st0 = sim.sim.state()
         rec.nominal_height = float(st0.q[2])
         dt_ns = round(dt * 1e9)
-        last_rec_ns, next_frame, fell_at = -1, 0.0, None
+        last_rec_ns = -1
         wall0 = time.perf_counter()
         ticks_seen = 0
-        pending = sorted(pushes, key=lambda p: p.time)
         while True:
             executor.spin_once(timeout_sec=0.05)
             now_ns = sim.now_ns
@@ -187,39 +277,124 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
                 rec.tick_t.append(mpc.plan.t0)
                 rec.tick_time.append(mpc.last_solve_time)
                 rec.tick_iterations.append(mpc.plan.stats.get("iterations", math.nan))
+                rec.plan_t.append(mpc.plan.t0)
+                rec.plan_age.append(now_ns / 1e9 - mpc.plan.t0)
             if now_ns - last_rec_ns < dt_ns and last_rec_ns >= 0:
                 continue
             last_rec_ns = now_ns
-            t = now_ns / 1e9
-            while pending and t >= pending[0].time - 1e-9:
-                push = pending.pop(0)
-                sim.sim.push(sim.sim.cfg.base_link, push.force, duration=push.duration)
-                log.info("push %s N for %.2f s at t = %.2f s", push.force, push.duration, t)
-            st = sim.sim.state()
-            cmd_next = command_at(segments, t + dt)  # heard before the next state's tick
-            pub_cmd.publish(_twist(cmd_next))
-            rec.t.append(t)
-            rec.q.append(st.q)
-            rec.v.append(st.v)
-            rec.cmd.append(command_at(segments, t))
-            rec.cmd_mpc.append(mpc.mpc.cmd.copy())
-            rec.contact.append(st.foot_contact.copy())
-            if gif and t >= next_frame - 1e-9:
-                rec.frames.append(sim.sim.render())
-                next_frame += FRAME_PERIOD
-            if fell_at is None and fallen(st.q, rec.nominal_height):
-                fell_at = t
-                log.warning("the robot fell at t = %.2f s", t)
-            if t >= duration - 1e-9 or (fell_at is not None and t - fell_at >= stop_after_fall):
+            if loop.period(sim, now_ns / 1e9, dt, pub_cmd, mpc.mpc.cmd, render=True):
                 break
         rec.wall_time = time.perf_counter() - wall0
         rec.deadline_misses = mpc.deadline_misses
+        rec.stale_skips = mpc.stale_skips
         executor.shutdown()
         for node in (player, mpc, sim):
             node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
     return rec
+
+
+def control_period(robot: str) -> float:
+    """The MPC's control period (s) in ``robot``'s config (``mpc.dt``)."""
+    return MpcSettings.from_dict(load_robot_config(robot).section("mpc")).dt
+
+
+def _run_realtime(robot: str, iterations: int, loop: _Loop, domain_id: int | None,
+                  mpc_parameters: Mapping[str, object] | None,
+                  mpc_command: Sequence[str] | None, ready_timeout: float) -> Recording:
+    """The MPC in a process of its own (timer trigger), the simulator free at realtime
+    factor 1 in this one; the clock starts once the MPC's first plan has arrived."""
+    rec = loop.rec
+    dt = control_period(robot)
+    t_start = time.perf_counter()
+    with MpcProcess(robot, iterations, domain_id, mpc_parameters, mpc_command) as child:
+        ctx = rclpy.Context()
+        rclpy.init(context=ctx, domain_id=child.domain_id)
+        try:
+            sim = SimNode(context=ctx, parameter_overrides=[
+                Parameter("robot", value=robot), Parameter("lockstep", value=False),
+                Parameter("control_period", value=dt), Parameter("realtime_factor", value=1.0)])
+            player = Node("command_player", context=ctx)
+            pub_cmd = player.create_publisher(Twist, "cmd_vel", 10)
+            monitor = MpcMonitor(lambda: sim.now_ns, context=ctx)
+            executor = SingleThreadedExecutor(context=ctx)
+            for node in (player, monitor):  # the simulator joins once the MPC has planned
+                executor.add_node(node)
+            rec.feet = list(sim.sim.feet)
+            rec.nominal_height = float(sim.sim.state().q[2])
+            _wait_for_first_plan(executor, sim, monitor, child, ready_timeout)
+            rec.build_time = time.perf_counter() - t_start
+            executor.add_node(sim)
+            cpu0 = (time.process_time(), process_cpu_seconds(child.pid))
+            rec.wall_time = _realtime_loop(executor, sim, monitor, child, pub_cmd, dt, loop)
+            rec.mpc_process = {
+                "pid": child.pid, "domain_id": child.domain_id,
+                "memory_mb": process_memory_mb(child.pid),
+                "cpu_s": process_cpu_seconds(child.pid) - cpu0[1],
+                "sim_process_cpu_s": time.process_time() - cpu0[0],
+                "sim_process_memory_mb": process_memory_mb(os.getpid())}
+            _copy_ticks(monitor.record, rec)
+            executor.shutdown()
+            for node in (player, monitor, sim):
+                node.destroy_node()
+        finally:
+            rclpy.try_shutdown(context=ctx)
+        rec.mpc_process["exit_code"] = child.stop()
+        rec.mpc_log = child.log_tail(lines=200)
+    if loop.gif:  # rendered from the recorded states, not in the loop (it would steal time)
+        rec.frames = render_replay(robot, rec.t, rec.q)
+    return rec
+
+
+def _wait_for_first_plan(executor: SingleThreadedExecutor, sim: SimNode, monitor: MpcMonitor,
+                         child: MpcProcess, timeout: float) -> None:
+    """Wait until the MPC process is connected, then hold the simulator (one control period
+    per ``HOLD_PERIOD`` of wall time, so that the MPC's sim-clock timer fires) until its
+    first plan (the bootstrap solve) arrives."""
+    def spin() -> None:
+        executor.spin_once(timeout_sec=0.05)
+
+    wait_until(lambda: sim.peers_ready, spin, child, timeout,
+               "mpc_node's joint_states subscription and joint_trajectory publisher")
+    next_step = 0.0
+
+    def hold() -> None:
+        nonlocal next_step
+        if time.monotonic() >= next_step:
+            sim.step_once()
+            next_step = time.monotonic() + HOLD_PERIOD
+        spin()
+
+    wait_until(lambda: monitor.plans > 0, hold, child, timeout,
+               "first joint_trajectory (the MPC's bootstrap solve)")
+    log.info("mpc_node's first plan at t = %.2f s (sim); the clock runs", sim.now_ns / 1e9)
+
+
+def _realtime_loop(executor: SingleThreadedExecutor, sim: SimNode, monitor: MpcMonitor,
+                   child: MpcProcess, pub_cmd: Publisher, dt: float, loop: _Loop) -> float:
+    """Spin until the run is over, recording every control period; returns the wall time."""
+    dt_ns = round(dt * 1e9)
+    start_ns = next_ns = sim.now_ns
+    wall0 = time.perf_counter()
+    while True:
+        executor.spin_once(timeout_sec=0.05)
+        now_ns = sim.now_ns
+        if now_ns < next_ns:
+            continue
+        next_ns = start_ns + ((now_ns - start_ns) // dt_ns + 1) * dt_ns  # the next period
+        child.check_alive("during the run")
+        if loop.period(sim, now_ns / 1e9, dt, pub_cmd, monitor.record.command, render=False):
+            return time.perf_counter() - wall0
+
+
+def _copy_ticks(heard: TickRecord, rec: Recording) -> None:
+    """The MPC process's ticks and plans, as heard through ROS, into the recording."""
+    rec.tick_t, rec.tick_time = list(heard.tick_t), list(heard.tick_time)
+    rec.tick_iterations = list(heard.iterations)
+    rec.plan_t, rec.plan_age = list(heard.plan_t), list(heard.plan_age)
+    rec.deadline_misses = int(heard.counters["deadline_misses"])
+    rec.stale_skips = int(heard.counters["stale_skips"])
 
 
 def _twist(cmd: np.ndarray) -> Twist:
@@ -229,7 +404,10 @@ def _twist(cmd: np.ndarray) -> Twist:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """CLI: run the closed loop and write summary.json, plots and a GIF into ``--out``."""
+    """CLI: run the closed loop and write summary.json, plots and a GIF into ``--out``.
+
+    Exit code 0, or 1 when the MPC process (real-time mode) failed (the error says why).
+    """
     from horizon_mpc.closed_loop_report import summarise, write_report
 
     ap = argparse.ArgumentParser(prog="python -m horizon_mpc.closed_loop",
@@ -247,17 +425,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = ap.parse_args(remove_ros_args(["closed_loop", *argv])[1:])  # tolerate --ros-args
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    # DDS discovery on this host only, for this process and the MPC process alike
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     profile = args.profile or DEFAULT_PROFILE  # an empty --profile (launch default) = default
     segments = load_profile(profile)
     pushes = load_pushes(profile)
     log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, profile)
-    rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
-              pushes=pushes)
+    try:
+        rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
+                  pushes=pushes)
+    except MpcProcessError as exc:
+        log.error("%s", exc)
+        return 1
     summary = summarise(rec, segments, mode=args.mode, robot=args.robot)
     written = write_report(rec, summary, args.out)
-    log.info("sim %.2f s in %.1f s wall (real-time factor %.3f); tick median %.1f ms; falls: %d",
+    age = summary["plan_age_ms"]
+    log.info("sim %.2f s in %.1f s wall (real-time factor %.3f); %.1f ticks per sim s, tick "
+             "median %.1f ms, plan age median %.1f ms (p95 %.1f); falls: %d",
              summary["sim_time"], summary["wall_time"], summary["real_time_factor"],
-             summary["tick_time_ms"]["median"], summary["falls"]["count"])
+             summary["ticks_per_sim_second"], summary["tick_time_ms"]["median"],
+             age["median"], age["p95"], summary["falls"]["count"])
     for path in written:
         log.info("wrote %s", path)
     return 0

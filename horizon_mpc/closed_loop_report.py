@@ -18,7 +18,7 @@ import numpy as np
 if TYPE_CHECKING:
     from horizon_mpc.closed_loop import Recording, Segment
 
-__all__ = ["fallen", "roll_pitch_yaw", "summarise", "write_report"]
+__all__ = ["fallen", "render_replay", "roll_pitch_yaw", "summarise", "write_report"]
 
 SETTLING = 1.0  # s after a segment starts before its tracking error counts
 FALL_HEIGHT = 0.6  # fraction of the nominal base height below which the robot has fallen
@@ -44,10 +44,35 @@ def fallen(q: np.ndarray, nominal_height: float) -> bool:
 
 
 def _percentiles(x: np.ndarray) -> dict[str, float]:
+    """median, p95, p99 and max of ``x`` (s) in ms (NaN when empty)."""
+    x = np.asarray(x, dtype=float)
     if x.size == 0:
-        return {"median": math.nan, "p95": math.nan, "max": math.nan}
+        return dict.fromkeys(("median", "p95", "p99", "max"), math.nan)
     return {"median": float(np.median(x) * 1e3), "p95": float(np.percentile(x, 95) * 1e3),
-            "max": float(np.max(x) * 1e3)}
+            "p99": float(np.percentile(x, 99) * 1e3), "max": float(np.max(x) * 1e3)}
+
+
+def _ticks(d: dict[str, np.ndarray], t0: float, t1: float, period: float,
+           deadline_misses: int) -> dict:
+    """Tick figures over the recorded span [t0, t1] (s of sim time): ticks per sim second
+    and control periods without a tick (from the ticks' stamps), solve time percentiles
+    (the first tick, the bootstrap solve, apart), deadline misses, plan age."""
+    tick_t, tick = d["tick_t"], d["tick_time"]
+    span = t1 - t0 + period  # the control periods recorded, both ends included
+    inside = int(np.count_nonzero((tick_t >= t0 - 1e-9) & (tick_t <= t1 + 1e-9)))
+    expected = span / period if period > 0 else math.nan
+    solves = max(tick.size - 1, 0)
+    return {
+        "ticks": int(tick.size),
+        "ticks_per_sim_second": inside / span if span > 0 else math.nan,
+        "periods_without_tick_percent": 100.0 * max(expected - inside, 0.0) / expected
+        if expected > 0 else math.nan,
+        "tick_time_ms": _percentiles(tick[1:]),
+        "bootstrap_ms": float(tick[0] * 1e3) if tick.size else math.nan,
+        "deadline_misses": deadline_misses,
+        "deadline_miss_percent": 100.0 * deadline_misses / solves if solves else math.nan,
+        "plan_age_ms": _percentiles(d["plan_age"]),
+    }
 
 
 def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep",
@@ -77,8 +102,10 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
     onsets = np.flatnonzero(fall_flags & ~np.concatenate(([False], fall_flags[:-1])))
     xy = q[:, :2] if len(q) else np.zeros((0, 2))
     sim_time = float(t[-1] - t[0]) if len(t) > 1 else 0.0
-    tick = d["tick_time"]
+    period = float(np.median(np.diff(t))) if len(t) > 1 else math.nan
     rpy = roll_pitch_yaw(q[:, 3:7]) if len(q) else np.zeros((0, 3))
+    ticks = _ticks(d, float(t[0]) if len(t) else 0.0, float(t[-1]) if len(t) else 0.0,
+                   period, rec.deadline_misses)
     return {
         "robot": robot,
         "mode": mode,
@@ -95,11 +122,29 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
                               f"|roll|, |pitch| > {FALL_TILT} rad"},
         "min_base_height": float(q[:, 2].min()) if len(q) else math.nan,
         "max_abs_roll_pitch": float(np.abs(rpy[:, :2]).max()) if len(rpy) else math.nan,
-        "ticks": int(tick.size),
-        "tick_time_ms": _percentiles(tick),
-        "deadline_misses": rec.deadline_misses,
+        **ticks,
+        "stale_skips": rec.stale_skips,
+        "mpc_process": rec.mpc_process,
         "gif_frames": len(rec.frames),
     }
+
+
+def render_replay(robot: str, t: Sequence[float], q: Sequence[np.ndarray],
+                  period: float = FRAME_PERIOD) -> list[np.ndarray]:
+    """GIF frames of a finished run: the recorded configurations ``q`` (Pinocchio, one per
+    time in ``t``, s) set into a fresh headless simulator and rendered every ``period`` s of
+    sim time (the nearest recorded state to each frame time)."""
+    from horizon_mpc.sim import Simulator
+
+    t = np.asarray(t, dtype=float)
+    if t.size == 0:
+        return []
+    frames = []
+    with Simulator(robot) as sim:
+        for tf in np.arange(t[0], t[-1] + 1e-9, period):
+            sim.set_state(q[int(np.argmin(np.abs(t - tf)))])
+            frames.append(sim.render())
+    return frames
 
 
 def write_report(rec: Recording, summary: dict, out: str | Path) -> list[Path]:
@@ -113,6 +158,9 @@ def write_report(rec: Recording, summary: dict, out: str | Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     written = [out / "summary.json"]
     written[0].write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    if rec.mpc_log:
+        written.append(out / "mpc_node.log")
+        written[-1].write_text(rec.mpc_log + "\n", encoding="utf-8")
     d = rec.arrays()
     t = d["t"]
     if len(t) == 0:

@@ -1,8 +1,9 @@
 """The closed-loop benchmark (``bench/bench_closed_loop.py``) runs and writes well-formed JSON.
 
-Tiny configuration: go2, lockstep, 2.2 s of sim time (the forward segment gets 0.2 s of
-tracking samples after its 1 s of settling), no GIF, in this process. What is
-checked is the plumbing (keys, finite figures, the breakdown adding up), not the figures.
+Tiny configurations: go2, 2.2 s of sim time (the forward segment gets 0.2 s of tracking
+samples after its 1 s of settling), no GIF, in this process; lockstep, and real time (the MPC
+process runs the probes and hands its figures back). What is checked is the plumbing (keys,
+finite figures, the breakdown adding up), not the figures.
 """
 
 from __future__ import annotations
@@ -46,6 +47,14 @@ def test_the_profile_is_the_documented_one():
     assert bench.profile("solo12")[1].vx == bench.profile("anymal_c")[1].vx == 0.2
 
 
+def test_repeats_interleave_the_robots_and_the_gif_comes_from_the_first_round():
+    args = bench.parse_args(["--robots", "go2", "solo12", "--repeats", "2"])
+    assert bench.plan_runs(args) == [
+        ("go2", "go2", "realtime", True), ("solo12", "solo12", "realtime", True),
+        ("go2_r2", "go2", "realtime", False), ("solo12_r2", "solo12", "realtime", False),
+        ("go2_lockstep", "go2", "lockstep", False)]
+
+
 def test_the_probes_are_removed_after_a_run():
     from horizon_mpc.mpc.controller import WalkingMpc
     from horizon_mpc.nodes.mpc_node import MpcNode
@@ -82,6 +91,7 @@ def test_a_tiny_lockstep_run_gives_finite_figures(tmp_path):
     assert ticks["iterations_per_tick"] == 1
     assert ticks["control_periods"]["rate_hz"] == pytest.approx(50, rel=0.1)
     assert ticks["state_lag_ms"]["max"] == 0  # lockstep: the sim waits for every plan
+    assert ticks["plan_age_ms"]["max"] == 0
     assert 0 <= ticks["deadline_misses"]["percent"] <= 100
     assert on_disk["bench"]["memory_mb"]["peak"] > 50
     assert all(_finite(v) for v in on_disk["bench"]["wall_s_per_sim_s"].values())
@@ -108,3 +118,26 @@ def test_a_tiny_lockstep_run_gives_finite_figures(tmp_path):
     assert "go2" in text and "Crocoddyl" in text
     bench.plot_aggregate(agg, tmp_path / "closed_loop.png")
     assert (tmp_path / "closed_loop.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_a_tiny_realtime_run_brings_the_mpc_process_figures_back(tmp_path):
+    summary = bench.measure("go2", "realtime", 2.2, gif=False, out=tmp_path / "go2")
+    on_disk = _strict(tmp_path / "go2" / "summary.json")
+    ticks = on_disk["bench"]["ticks"]
+    assert ticks["n"] > 20  # ticks of the MPC process, timed there by the probes
+    assert _finite(ticks["bootstrap_ms"]) and ticks["bootstrap_ms"] > 0
+    b = ticks["breakdown_ms_mean"]
+    assert all(_finite(b[k]) for k in bench.PHASES) and b["ilqr"] > 0
+    assert ticks["plan_age_ms"]["median"] > 0  # in real time a plan arrives after its state
+    assert ticks["messages"]["joint_states"] > 0
+    memory = on_disk["bench"]["memory_mb"]
+    assert memory["process"].startswith("mpc_node") and memory["peak"] > 50
+    assert memory["mpc_node_construction"] > 0
+    budget = on_disk["bench"]["wall_s_per_sim_s"]
+    assert all(_finite(budget[k]) for k in ("sim", "mpc_tick", "mpc_inputs", "cpu_mpc_process",
+                                            "cpu_sim_process"))
+    assert budget["mpc_tick"] > 0.1  # ticks at ~50 Hz of ~10 ms each, give or take the load
+    assert summary["mpc_process"]["exit_code"] == 0
+    assert {"ticks.csv", "tick_breakdown.png", "mpc_node.log"} <= {
+        p.name for p in (tmp_path / "go2").iterdir()}

@@ -1,8 +1,15 @@
-"""The closed loop: sim_node + mpc_node in one process, lockstep, through the ROS topics."""
+"""The closed loop, through the ROS topics: lockstep (sim_node + mpc_node in one process,
+the acceptance tests) and real time (mpc_node in a process of its own)."""
 
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +17,7 @@ import pytest
 from horizon_mpc.closed_loop import (
     DEFAULT_PROFILE,
     Push,
+    Recording,
     Segment,
     command_at,
     load_profile,
@@ -17,6 +25,7 @@ from horizon_mpc.closed_loop import (
     run,
 )
 from horizon_mpc.closed_loop_report import roll_pitch_yaw, summarise, write_report
+from horizon_mpc.nodes.mpc_process import MpcProcess, MpcProcessError
 
 
 def test_the_default_profile_is_the_documented_one():
@@ -81,10 +90,12 @@ def test_the_run_writes_summary_plots_and_gif(acceptance_run):
     assert all((out / n).stat().st_size > 0 for n in names)
     data = json.loads((out / "summary.json").read_text())
     for key in ("segments", "distance_travelled", "falls", "tick_time_ms", "deadline_misses",
-                "real_time_factor"):
+                "real_time_factor", "ticks_per_sim_second", "plan_age_ms", "bootstrap_ms"):
         assert key in data
     # lockstep: one MPC tick per control period (20 ms), each on a state published by the sim
     assert summary["ticks"] >= len(rec.t) - 2
+    assert summary["ticks_per_sim_second"] == pytest.approx(50, rel=0.02)
+    assert summary["plan_age_ms"]["max"] == 0  # the sim waits for every plan
 
 
 @pytest.mark.slow
@@ -173,3 +184,192 @@ def test_other_robots_walk_forward_with_their_configs_only(robot):
     assert rec.t[-1] >= 4.95
     v = np.asarray(rec.v)[_window(rec, 3.0, 5.0)]
     assert v[:, 0].mean() > 0.1  # it walks forward (tracking quality is reported, not gated)
+
+
+# ---------------------------------------------------------------------- summary of the ticks
+def test_the_summary_counts_ticks_per_sim_second_and_keeps_the_bootstrap_apart():
+    """10 control periods of 20 ms, 9 ticks (one period missed), the first one the bootstrap."""
+    rec = Recording(nominal_height=0.3)
+    t = np.arange(10) * 0.02
+    q0 = np.r_[0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0, np.zeros(12)]
+    for ti in t:
+        rec.t.append(float(ti))
+        rec.q.append(q0)
+        rec.v.append(np.zeros(18))
+        rec.cmd.append(np.zeros(3))
+        rec.cmd_mpc.append(np.zeros(3))
+        rec.contact.append(np.ones(4, bool))
+    rec.tick_t = [float(x) for x in np.delete(t, 5)]
+    rec.tick_time = [0.050] + [0.010] * 7 + [0.030]
+    rec.plan_t = list(rec.tick_t)
+    rec.plan_age = [0.0] * 4 + [0.012] * 5
+    rec.deadline_misses, rec.wall_time = 1, 0.2
+    s = summarise(rec, [Segment(0.2)], mode="realtime")
+    assert s["ticks"] == 9
+    assert s["ticks_per_sim_second"] == pytest.approx(45.0)  # 9 ticks in 10 periods of 20 ms
+    assert s["periods_without_tick_percent"] == pytest.approx(10.0)
+    assert s["bootstrap_ms"] == pytest.approx(50.0)
+    assert s["tick_time_ms"]["median"] == pytest.approx(10.0)
+    assert s["tick_time_ms"]["max"] == pytest.approx(30.0)
+    assert s["deadline_miss_percent"] == pytest.approx(12.5)  # 1 of the 8 ticks after the bootstrap
+    assert s["plan_age_ms"]["median"] == pytest.approx(12.0)
+
+
+# ---------------------------------------------------------------------- real-time mode
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _children(pid: int) -> list[int]:
+    """Process ids whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+@pytest.fixture
+def started_processes(monkeypatch):
+    """The MpcProcess objects a real-time run starts (to check on them afterwards)."""
+    started = []
+    original = MpcProcess.start
+
+    def start(self):
+        started.append(self)
+        return original(self)
+
+    monkeypatch.setattr(MpcProcess, "start", start)
+    return started
+
+
+REALTIME_SHORT = [Segment(1.0), Segment(1.5, vx=0.2)]
+
+
+@pytest.fixture(scope="module")
+def realtime_run(tmp_path_factory):
+    """go2 in real time for 2.5 s (stand 1 s, forward 0.2 m/s), MPC in its own process."""
+    rec = run("go2", REALTIME_SHORT, mode="realtime", gif=True)
+    summary = summarise(rec, REALTIME_SHORT, mode="realtime", robot="go2")
+    out = tmp_path_factory.mktemp("closed_loop_realtime")
+    return rec, summary, write_report(rec, summary, out)
+
+
+@pytest.mark.slow
+def test_realtime_mode_runs_the_mpc_in_a_second_process(realtime_run):
+    rec, summary, _ = realtime_run
+    child = summary["mpc_process"]
+    assert child["pid"] != os.getpid() and child["exit_code"] == 0
+    assert not _running(child["pid"])  # stopped and reaped at the end of the run
+    assert child["memory_mb"]["peak"] > 50  # it built a walking MPC of its own
+    assert child["cpu_s"] > 0.1 * summary["sim_time"]
+    assert "bootstrapped" in rec.mpc_log  # its output is kept
+
+
+@pytest.mark.slow
+def test_realtime_mode_hears_the_ticks_of_the_child_through_ros(realtime_run):
+    """Structure and sane bounds only: real time on a shared machine is noisy."""
+    rec, summary, _ = realtime_run
+    assert rec.t[-1] >= 2.5 - 0.05
+    assert 0.5 < summary["real_time_factor"] < 1.1  # the sim keeps to the wall clock
+    assert 10 < summary["ticks_per_sim_second"] <= 51  # a timer at 50 Hz on the sim clock
+    assert summary["ticks"] == len(rec.tick_time) == len(rec.tick_iterations)
+    assert all(i >= 1 for i in rec.tick_iterations)
+    assert 0 < summary["tick_time_ms"]["median"] < summary["tick_time_ms"]["max"] < 1000
+    assert np.isfinite(summary["bootstrap_ms"])
+    # every plan is stamped with the state it started from: the sim got it later, never before
+    assert summary["ticks"] - 2 <= len(rec.plan_age) <= summary["ticks"]
+    assert min(rec.plan_age) >= 0 and summary["plan_age_ms"]["median"] < 500
+    assert 0 <= summary["deadline_misses"] <= summary["ticks"]
+    # the MPC's ramped command, read from its diagnostics, follows the profile's 0.2 m/s
+    assert np.asarray(rec.cmd_mpc)[-1, 0] == pytest.approx(0.2, abs=0.05)
+
+
+@pytest.mark.slow
+def test_realtime_mode_renders_the_gif_afterwards_from_the_recorded_states(realtime_run):
+    rec, summary, written = realtime_run
+    assert "run.gif" in {p.name for p in written} and "mpc_node.log" in {p.name for p in written}
+    assert summary["gif_frames"] == pytest.approx((rec.t[-1] - rec.t[0]) / 0.05 + 1, abs=1)
+    assert rec.frames[0].shape == (240, 320, 3)
+
+
+def test_an_unknown_robot_fails_before_any_process_starts(started_processes):
+    with pytest.raises(FileNotFoundError, match="go3"):
+        run("go3", REALTIME_SHORT, mode="realtime")
+    assert started_processes == []
+
+
+def test_an_mpc_process_that_fails_to_start_is_a_clear_error(started_processes):
+    with pytest.raises(MpcProcessError, match=r"(?s)exited with code 1 .*trigger must be"):
+        run("go2", REALTIME_SHORT, mode="realtime", gif=False,
+            mpc_parameters={"trigger": "sometimes"})
+    assert len(started_processes) == 1 and not started_processes[0].alive()
+
+
+@pytest.mark.slow
+def test_the_mpc_process_is_stopped_when_the_run_raises(started_processes, monkeypatch):
+    import horizon_mpc.closed_loop as closed_loop
+
+    def boom(*_):
+        raise RuntimeError("boom in the run loop")
+
+    monkeypatch.setattr(closed_loop, "command_at", boom)  # first called after the first plan
+    with pytest.raises(RuntimeError, match="boom in the run loop"):
+        run("go2", REALTIME_SHORT, mode="realtime", gif=False)
+    (child,) = started_processes
+    assert child.returncode == 0  # SIGINT: a clean exit
+    assert not _running(child.pid)
+
+
+def _start_cli_and_wait_for_its_child(tmp_path: Path) -> tuple[subprocess.Popen, int]:
+    """``closed_loop --mode realtime`` for a long profile; returns it and its MPC process."""
+    profile = tmp_path / "long.yaml"
+    profile.write_text("- {duration: 60.0}\n")
+    parent = subprocess.Popen(
+        [sys.executable, "-m", "horizon_mpc.closed_loop", "--mode", "realtime", "--no-gif",
+         "--profile", str(profile), "--out", str(tmp_path / "out")],
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    children: list[int] = []
+    while not children and time.monotonic() < deadline and parent.poll() is None:
+        time.sleep(0.2)
+        children = _children(parent.pid)
+    assert children, "the closed loop started no MPC process"
+    time.sleep(1.0)  # let the parent reach its run loop or readiness wait
+    return parent, children[0]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+def test_no_mpc_process_outlives_a_stopped_or_killed_closed_loop(tmp_path, sig):
+    """SIGINT (Ctrl-C): the parent stops its child on the way out. SIGKILL: no cleanup can
+    run, the kernel sends the child SIGTERM (parent-death signal)."""
+    parent, child = _start_cli_and_wait_for_its_child(tmp_path)
+    try:
+        parent.send_signal(sig)
+        parent.wait(timeout=60)
+        deadline = time.monotonic() + 30
+        while _running(child) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _running(child) or _zombie(child), f"mpc_node {child} outlived its parent"
+    finally:
+        for pid in (parent.pid, child):
+            if _running(pid):
+                os.kill(pid, signal.SIGKILL)
+        parent.wait(timeout=10)
+
+
+def _zombie(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return False
