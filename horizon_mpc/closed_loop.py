@@ -22,11 +22,9 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import rclpy
-import yaml
 from geometry_msgs.msg import Twist
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -34,6 +32,14 @@ from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.utilities import remove_ros_args
 
+from horizon_mpc.closed_loop_profile import (
+    DEFAULT_PROFILE,
+    Push,
+    Segment,
+    command_at,
+    load_profile,
+    load_pushes,
+)
 from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen, render_replay
 from horizon_mpc.config import load_robot_config
 from horizon_mpc.locomotion import MpcSettings
@@ -49,86 +55,15 @@ from horizon_mpc.nodes.mpc_process import (
 )
 from horizon_mpc.nodes.sim_node import SimNode
 
-__all__ = ["Push", "Recording", "Segment", "control_period", "load_profile", "load_pushes",
-           "main", "run"]
+__all__ = ["DEFAULT_PROFILE", "Push", "Recording", "Segment", "command_at", "control_period",
+           "load_profile", "load_pushes", "main", "run"]
 
 log = logging.getLogger(__name__)
 
-DEFAULT_PROFILE = Path(__file__).resolve().parent.parent / "config" / "commands" / "default.yaml"
 #: s (wall) to wait for the MPC process to connect, and again for its first plan
 READY_TIMEOUT = 120.0
 #: s (wall) per control period while the simulator holds for the MPC's first plan
 HOLD_PERIOD = 0.25
-
-
-@dataclass
-class Segment:
-    """A constant command ``(vx, vy, wz)`` (base frame) held for ``duration`` s."""
-
-    duration: float
-    vx: float = 0.0
-    vy: float = 0.0
-    wz: float = 0.0
-
-
-@dataclass
-class Push:
-    """A world-frame ``force`` (N) on the base for ``duration`` s from sim time ``time``."""
-
-    time: float
-    force: tuple[float, float, float]
-    duration: float = 0.1
-
-
-def load_pushes(path: str | Path) -> list[Push]:
-    """The optional ``pushes:`` list of a profile YAML (``{time, force: [fx, fy, fz],
-    duration}``); empty when the profile has none."""
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
-    items = data.get("pushes", []) if isinstance(data, dict) else []
-    pushes = []
-    for i, item in enumerate(items or []):
-        try:
-            force = tuple(float(f) for f in item["force"])
-            push = Push(float(item["time"]), force, float(item.get("duration", 0.1)))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"{path}: push {i} needs time, force [fx, fy, fz] and an optional "
-                             f"duration ({exc})") from None
-        if len(force) != 3 or not push.duration > 0 or not all(map(math.isfinite, force)):
-            raise ValueError(f"{path}: push {i}: force must be 3 finite numbers and the "
-                             "duration positive")
-        pushes.append(push)
-    return pushes
-
-
-def load_profile(path: str | Path) -> list[Segment]:
-    """Segments of a command profile YAML (a list, or a mapping with ``segments:``)."""
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
-    items = data.get("segments") if isinstance(data, dict) else data
-    if not isinstance(items, list) or not items:
-        raise ValueError(f"{path}: expected a list of segments {{duration, vx, vy, wz}}")
-    segs = []
-    for i, item in enumerate(items):
-        unknown = set(item) - {"duration", "vx", "vy", "wz"}
-        if unknown or "duration" not in item:
-            raise ValueError(f"{path}: segment {i} needs 'duration' and only vx/vy/wz, got "
-                             f"{sorted(item)}")
-        seg = Segment(**{k: float(v) for k, v in item.items()})
-        if not seg.duration > 0:
-            raise ValueError(f"{path}: segment {i} has non-positive duration {seg.duration}")
-        segs.append(seg)
-    return segs
-
-
-def command_at(segments: Sequence[Segment], t: float) -> np.ndarray:
-    """The profile's ``(vx, vy, wz)`` at time ``t`` (zero after the last segment)."""
-    end = 0.0
-    for seg in segments:
-        end += seg.duration
-        if t < end - 1e-9:
-            return np.array([seg.vx, seg.vy, seg.wz])
-    return np.zeros(3)
 
 
 @dataclass
