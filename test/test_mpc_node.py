@@ -263,7 +263,8 @@ class Sent:
         self.msgs.append(copy.deepcopy(msg))
 
 
-def drive_in_sim_time(node: MpcNode, n_ticks: int, period_ns: int = 20_000_000) -> dict:
+def drive_in_sim_time(node: MpcNode, n_ticks: int, period_ns: int = 20_000_000,
+                      start_ns: int = 10 * NS_PER_S) -> dict:
     """Feed ``n_ticks`` standing states ``period_ns`` apart straight into the node's callbacks
     on a sim clock that follows the stamps; returns what it published, by output."""
     sent = {"traj": Sent(), "path": Sent(), "diag": Sent()}
@@ -271,7 +272,7 @@ def drive_in_sim_time(node: MpcNode, n_ticks: int, period_ns: int = 20_000_000) 
     _, q = standing_configuration(node.mpc.cfg)
     zeros = np.zeros(3)
     for k in range(n_ticks):
-        ns = 10 * NS_PER_S + k * period_ns
+        ns = start_ns + k * period_ns
         node.get_clock().set_ros_time_override(RosTime(nanoseconds=ns))
         stamp = time_from_ns(ns)
         node._on_joint_state(joint_state_to_msg(stamp, node.joint_names, q[7:],
@@ -305,6 +306,14 @@ def test_the_path_and_diagnostics_go_out_at_their_rates(context, walking_mpc):
     assert 3 <= len(sent) < 21
     for (t0, level0), (t1, level1) in itertools.pairwise(sent):
         assert t1 - t0 >= 0.18 * NS_PER_S or level1 > level0
+    node.destroy_node()
+
+
+def test_a_sim_clock_that_restarts_does_not_silence_the_path(context, walking_mpc):
+    node = sim_time_node(context, walking_mpc, path_rate=1.0)
+    first = drive_in_sim_time(node, 3, period_ns=100_000_000, start_ns=20 * NS_PER_S)
+    again = drive_in_sim_time(node, 1, start_ns=10 * NS_PER_S)  # the clock went back 10 s
+    assert len(first["path"]) == 1 and len(again["path"]) == 1
     node.destroy_node()
 
 

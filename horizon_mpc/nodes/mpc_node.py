@@ -483,8 +483,11 @@ def _period_ns(rate: float) -> int:
 
 def _due(last_ns: int | None, period_ns: int, now_ns: int) -> bool:
     """Whether a publication with this period is due (ticks a tenth early still count:
-    a 10 Hz path is then every 5th tick at 50 Hz despite timer jitter)."""
-    return last_ns is None or now_ns - last_ns >= period_ns - period_ns // 10
+    a 10 Hz path is then every 5th tick at 50 Hz despite timer jitter). A clock that went
+    back (a restarted simulator) makes it due too."""
+    if last_ns is None or now_ns < last_ns:
+        return True
+    return now_ns - last_ns >= period_ns - period_ns // 10
 
 
 def _set_stamp(stamp: Time, ns: int) -> None:
