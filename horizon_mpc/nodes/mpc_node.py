@@ -10,7 +10,6 @@ mode needs; ``trigger: timer`` ticks at ``control_rate`` on the node's clock.
 
 from __future__ import annotations
 
-import array
 import dataclasses
 import math
 import sys
@@ -18,9 +17,8 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped, Twist
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry, Path
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -31,23 +29,25 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from trajectory_msgs.msg import JointTrajectory
 
 from horizon_mpc.config import load_robot_config
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.locomotion.gaits import GAITS
 from horizon_mpc.locomotion.settings import Weights
 from horizon_mpc.mpc.controller import Plan, WalkingMpc
-from horizon_mpc.nodes.conversions import (
-    NS_PER_S,
-    duration_from_seconds,
-    time_from_ns,
-    time_to_ns,
-)
+from horizon_mpc.nodes.conversions import NS_PER_S, time_to_ns
 from horizon_mpc.nodes.mpc_inputs import (
     base_from_odometry,
     command_from_twist,
     joints_from_joint_state,
+)
+from horizon_mpc.nodes.mpc_outputs import (
+    DiagnosticsMessage,
+    due,
+    fill_path,
+    period_ns,
+    trajectory_from_plan,
 )
 from horizon_mpc.nodes.spin import spin_until_signal
 
@@ -112,13 +112,13 @@ class MpcNode(Node):
         mpc.prepare_inverse_dynamics(self.publish_points)  # compiled now, not in a tick
         self.trigger = self._p("trigger")
         # the predicted path and the diagnostics may go out at lower rates than the ticks
-        self._path_period_ns = _period_ns(self._p("path_rate"))
-        self._diag_period_ns = _period_ns(self._p("diagnostics_rate"))
+        self._path_period_ns = period_ns(self._p("path_rate"))
+        self._diag_period_ns = period_ns(self._p("diagnostics_rate"))
         self._last_path_ns: int | None = None
         self._last_diag: tuple[int, bytes] | None = None  # (node clock ns, level) last sent
         self._solve_time_max = 0.0  # s, over the ticks since the last diagnostics
         self._path = Path()  # reused: its poses are overwritten in place (see path_msg)
-        self._diag = _DiagnosticsMessage(f"{self.get_name()}: walking MPC", mpc.cfg.name)
+        self._diag = DiagnosticsMessage(f"{self.get_name()}: walking MPC", mpc.cfg.name)
 
         # latest accepted inputs: (stamp ns, arrays...) / (receipt time s, cmd)
         self._joints: tuple[int, np.ndarray, np.ndarray] | None = None
@@ -366,55 +366,20 @@ class MpcNode(Node):
     def _publish_plan(self, plan: Plan, stamp_ns: int, now_ns: int) -> None:
         """The trajectory every tick; the path and diagnostics when their period is due."""
         self._pub_traj.publish(self.trajectory_msg(plan, stamp_ns))
-        if _due(self._last_path_ns, self._path_period_ns, now_ns):
+        if due(self._last_path_ns, self._path_period_ns, now_ns):
             self._last_path_ns = now_ns
             self._pub_path.publish(self.path_msg(plan, stamp_ns))
         self._publish_diagnostics(plan, stamp_ns, now_ns)
 
     def trajectory_msg(self, plan: Plan, stamp_ns: int) -> JointTrajectory:
-        """The first ``publish_points`` nodes of ``plan`` (joints in model order).
-
-        Efforts are ``plan.tau_head(n)``: the inverse dynamics of the published nodes only.
-        """
-        msg = JointTrajectory()
-        msg.header.stamp = time_from_ns(stamp_ns)
-        msg.joint_names = self.joint_names
-        n = min(self.publish_points, plan.a.shape[1])
-        # one C-ordered (4, n, nj) block: each point's field is a row, handed to the message
-        # as array.array (the fastest type rclpy accepts for sequence<double>)
-        rows = np.stack((plan.q[7:, :n].T, plan.v[6:, :n].T, plan.a[6:, :n].T,
-                         plan.tau_head(n)[6:].T))
-        points = []
-        for k in range(n):
-            pt = JointTrajectoryPoint()
-            pt.positions = array.array("d", rows[0, k].tobytes())
-            pt.velocities = array.array("d", rows[1, k].tobytes())
-            pt.accelerations = array.array("d", rows[2, k].tobytes())
-            pt.effort = array.array("d", rows[3, k].tobytes())
-            pt.time_from_start = duration_from_seconds(k * plan.dt)
-            points.append(pt)
-        msg.points = points
-        return msg
+        """The first ``publish_points`` nodes of ``plan`` (joints in model order); efforts
+        from the inverse dynamics of those nodes only (:func:`trajectory_from_plan`)."""
+        return trajectory_from_plan(plan, self.joint_names, self.publish_points, stamp_ns)
 
     def path_msg(self, plan: Plan, stamp_ns: int) -> Path:
-        """The planned base poses of every node, frame ``odom``.
-
-        Returns the node's one Path message, updated in place (building 41 poses anew costs
-        ~0.4 ms): it is overwritten by the next call, copy it to keep it.
-        """
-        msg = self._path
-        n = plan.q.shape[1]
-        if len(msg.poses) != n:
-            msg.header.frame_id = "odom"
-            msg.poses = [PoseStamped() for _ in range(n)]
-            for ps in msg.poses:
-                ps.header.frame_id = "odom"
-        _set_stamp(msg.header.stamp, stamp_ns)
-        for k, (ps, pose) in enumerate(zip(msg.poses, plan.q[:7].T.tolist(), strict=True)):
-            _set_stamp(ps.header.stamp, stamp_ns + round(k * plan.dt * NS_PER_S))
-            p, o = ps.pose.position, ps.pose.orientation
-            p.x, p.y, p.z, o.x, o.y, o.z, o.w = pose
-        return msg
+        """The planned base poses of every node, frame ``odom``: the node's one Path message,
+        refilled in place (:func:`fill_path`), so copy it to keep it past the next call."""
+        return fill_path(self._path, plan, stamp_ns)
 
     def gait_phase(self, t: float) -> float:
         """Phase in [0, 1) of the gait cycle at ``t`` (NaN while standing)."""
@@ -437,7 +402,7 @@ class MpcNode(Node):
             self._solve_time_max = max(self._solve_time_max, self.last_solve_time)
         now_ns = self.get_clock().now().nanoseconds if now_ns is None else now_ns
         last = self._last_diag  # a rising level (OK -> WARN) goes out at once
-        if last is not None and level <= last[1] and not _due(last[0], self._diag_period_ns,
+        if last is not None and level <= last[1] and not due(last[0], self._diag_period_ns,
                                                                now_ns):
             return
         self._last_diag = (now_ns, level)
@@ -458,41 +423,6 @@ class MpcNode(Node):
         }
         self._solve_time_max = 0.0
         self._pub_diag.publish(self._diag.filled(stamp_ns, level, message, values))
-
-
-class _DiagnosticsMessage:
-    """The node's one DiagnosticArray, refilled in place for every publication."""
-
-    def __init__(self, name: str, hardware_id: str) -> None:
-        self.status = DiagnosticStatus(name=name, hardware_id=hardware_id)
-        self.msg = DiagnosticArray(status=[self.status])
-
-    def filled(self, stamp_ns: int, level: bytes, message: str,
-               values: dict[str, object]) -> DiagnosticArray:
-        """The message with these stamp, level, message and ``str()`` of each value."""
-        _set_stamp(self.msg.header.stamp, stamp_ns)
-        self.status.level, self.status.message = level, message
-        self.status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
-        return self.msg
-
-
-def _period_ns(rate: float) -> int:
-    """The period (ns) of a publication rate (Hz); 0 for every tick."""
-    return round(NS_PER_S / rate) if rate > 0 else 0
-
-
-def _due(last_ns: int | None, period_ns: int, now_ns: int) -> bool:
-    """Whether a publication with this period is due (ticks a tenth early still count:
-    a 10 Hz path is then every 5th tick at 50 Hz despite timer jitter). A clock that went
-    back (a restarted simulator) makes it due too."""
-    if last_ns is None or now_ns < last_ns:
-        return True
-    return now_ns - last_ns >= period_ns - period_ns // 10
-
-
-def _set_stamp(stamp: Time, ns: int) -> None:
-    """Set a ``builtin_interfaces/Time`` in place (as :func:`time_from_ns`, no new message)."""
-    stamp.sec, stamp.nanosec = divmod(int(ns), NS_PER_S)
 
 
 def with_sim_time_default(argv: Sequence[str]) -> list[str]:
