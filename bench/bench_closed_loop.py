@@ -505,7 +505,7 @@ def pooled_rmse(segments: list[dict]) -> dict[str, float]:
 
 
 def measure(robot: str, mode: str = "realtime", duration: float | None = None,
-            gif: bool = True, out: Path | None = None, iterations: int = 1,
+            gif: bool = True, out: Path | None = None, iterations: int | None = None,
             sim_parameters: dict | None = None) -> dict:
     """One closed-loop run with the probes installed; returns (and writes into ``out``, with
     the report's plots) the closed-loop summary plus a ``bench`` section.
@@ -933,7 +933,9 @@ def run_isolated(robot: str, mode: str, args: argparse.Namespace, out: Path,
                  gif: bool) -> dict:
     """One measurement in a fresh interpreter (its peak RSS is then this run's alone)."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "--robots", robot,
-           "--mode", mode, "--out", str(out), "--iterations", str(args.iterations)]
+           "--mode", mode, "--out", str(out)]
+    if args.iterations is not None:
+        cmd += ["--iterations", str(args.iterations)]
     if args.duration is not None:
         cmd += ["--duration", str(args.duration)]
     if not gif:
@@ -968,7 +970,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                     help=f"also run {REFERENCE_ROBOT} in lockstep (when --mode realtime)")
     ap.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
                     help="write run.gif per robot (rendered after the run, from its states)")
-    ap.add_argument("--iterations", type=int, default=1, help="ILQR iterations per tick")
+    ap.add_argument("--iterations", type=int, default=None,
+                    help="ILQR iterations per tick (default: the robot config's mpc.iterations)")
     ap.add_argument("--repeats", type=int, default=1,
                     help="real-time runs per robot (robots interleaved; GIF of the first only)")
     ap.add_argument("--isolate", action=argparse.BooleanOptionalAction, default=True,

@@ -100,7 +100,7 @@ class Recording:
 
 def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         duration: float | None = None, mode: str = "lockstep", gif: bool = True,
-        iterations: int = 1, stop_after_fall: float = 1.0,
+        iterations: int | None = None, stop_after_fall: float = 1.0,
         pushes: Sequence[Push] = (), *, domain_id: int | None = None,
         mpc_parameters: Mapping[str, object] | None = None,
         mpc_command: Sequence[str] | None = None,
@@ -175,7 +175,7 @@ class _Loop:
             self.fell_at is not None and t - self.fell_at >= self.stop_after_fall)
 
 
-def _run_lockstep(robot: str, iterations: int, loop: _Loop) -> Recording:
+def _run_lockstep(robot: str, iterations: int | None, loop: _Loop) -> Recording:
     """One process, one executor: the simulator waits for each plan (deterministic)."""
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
@@ -185,7 +185,7 @@ def _run_lockstep(robot: str, iterations: int, loop: _Loop) -> Recording:
         mpc = MpcNode(context=ctx, parameter_overrides=[
             Parameter("robot", value=robot), Parameter("use_sim_time", value=True),
             Parameter("trigger", value="state"),
-            Parameter("iterations", value=int(iterations))])
+            *([] if iterations is None else [Parameter("iterations", value=int(iterations))])])
         rec.build_time = time.perf_counter() - t_build
         dt = mpc.mpc.settings.dt
         sim = SimNode(context=ctx, parameter_overrides=[
@@ -235,7 +235,7 @@ def control_period(robot: str) -> float:
     return MpcSettings.from_dict(load_robot_config(robot).section("mpc")).dt
 
 
-def _run_realtime(robot: str, iterations: int, loop: _Loop, domain_id: int | None,
+def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: int | None,
                   mpc_parameters: Mapping[str, object] | None,
                   mpc_command: Sequence[str] | None, ready_timeout: float) -> Recording:
     """The MPC in a process of its own (timer trigger), the simulator free at realtime
@@ -354,7 +354,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     ap.add_argument("--duration", type=float, default=None,
                     help="sim seconds to run (default: the profile's length)")
-    ap.add_argument("--iterations", type=int, default=1, help="ILQR iterations per tick")
+    ap.add_argument("--iterations", type=int, default=None,
+                    help="ILQR iterations per tick (default: the robot config's mpc.iterations)")
     ap.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
                     help="render a GIF (every 50 ms of sim time)")
     argv = sys.argv[1:] if argv is None else list(argv)

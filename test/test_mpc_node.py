@@ -442,3 +442,15 @@ def test_sim_node_and_mpc_node_started_without_arguments_work_together():
             finally:
                 if p.poll() is None:
                     p.kill()
+
+
+def test_iterations_per_tick_default_to_the_config_and_are_validated():
+    from horizon_mpc.locomotion import MpcSettings
+    from horizon_mpc.mpc import WalkingMpc
+
+    assert MpcSettings().iterations == 2
+    assert MpcSettings.from_dict({"iterations": 3}).iterations == 3
+    mpc = WalkingMpc("go2")
+    assert mpc.iterations == 2 and mpc.solver.opts["iterations_per_call"] == 2
+    with pytest.raises(ValueError, match="iterations per tick must be >= 1"):
+        WalkingMpc("go2", iterations=0)

@@ -44,6 +44,8 @@ def test_the_command_line_sets_the_node_parameters():
     assert ros == ["-p", "robot:=solo12", "-p", "use_sim_time:=true", "-p", "trigger:=timer",
                    "-p", "iterations:=2", "-p", "diagnostics_rate:=0.0",
                    "-p", "state_timeout:=0.5"]
+    # no iterations given: the node takes the robot config's mpc.iterations
+    assert not any(a.startswith("iterations:=") for a in MpcProcess("go2").argv)
 
 
 def test_the_child_environment_isolates_the_run_and_runs_this_checkout(monkeypatch):

@@ -125,3 +125,26 @@ def test_terms_cannot_be_added_once_built_into_a_solver(prb):
     make_solver("ipopt", prb)
     with pytest.raises(RuntimeError, match="already built into a solver"):
         prb.create_cost("late", prb.get_variable("u"))
+
+
+def test_node_selections_accept_masks_and_integer_arrays():
+    from horizon_mpc.problem.nodes import select_nodes
+
+    mask = np.zeros(6, bool)
+    mask[[1, 4]] = True
+    np.testing.assert_array_equal(select_nodes(mask, 6), [1, 4])
+    np.testing.assert_array_equal(select_nodes(np.array([4, 1, 4]), 6), [1, 4])
+    np.testing.assert_array_equal(select_nodes(np.array([0, 2, 5]), 6), [0, 2, 5])
+    with pytest.raises(IndexError, match="boolean node mask of shape"):
+        select_nodes(mask[:4], 6, "cost 'c'")
+    with pytest.raises(IndexError, match="out of range"):
+        select_nodes(np.array([1, 6]), 6, "cost 'c'")
+
+
+def test_a_term_switched_by_a_mask_is_active_exactly_there(prb):
+    x = prb.get_variable("x")
+    cost = prb.create_cost("mask_cost", x)
+    mask = np.zeros(prb.n_nodes + 1, bool)
+    mask[[0, 3]] = True
+    cost.set_nodes(mask)
+    np.testing.assert_array_equal(cost.nodes, [0, 3])

@@ -82,21 +82,27 @@ class WalkingMpc:
         cfg: robot config (or its name); its ``mpc:`` section gives the settings.
         model: the symbolic model (built from the config when None).
         settings: overrides the config's ``mpc:`` section.
-        iterations: ILQR iterations per tick (real-time iteration: 1).
+        iterations: ILQR iterations per tick (None: the settings' ``iterations``, 2 by
+            default).
     """
 
     def __init__(self, cfg: RobotConfig | str, model: RobotModel | None = None,
-                 settings: MpcSettings | None = None, iterations: int = 1):
+                 settings: MpcSettings | None = None, iterations: int | None = None):
         self.cfg = load_robot_config(cfg) if isinstance(cfg, str) else cfg
         if model is None:
             model = (RobotModel.from_urdf(self.cfg.urdf_path) if self.cfg.urdf_path
                      else RobotModel.from_example(self.cfg.robot))
         self.model = model
         self.settings = settings or MpcSettings.from_dict(self.cfg.section("mpc"))
+        if iterations is None:
+            iterations = self.settings.iterations
+        if int(iterations) < 1:
+            raise ValueError(f"iterations per tick must be >= 1, got {iterations}")
+        self.iterations = int(iterations)
         t = time.perf_counter()
         self.wp = build_walking_problem(model, self.cfg, self.settings)
         self.solver = make_solver("ilqr", self.wp.prb, {
-            "rti": True, "iterations_per_call": int(iterations),
+            "rti": True, "iterations_per_call": self.iterations,
             "rho_init": self.settings.rho_init})
         # per tick: numpy in/out through preallocated buffers (no DM conversion); one mapped
         # function per number of nodes asked for (the horizon, the node's published points)

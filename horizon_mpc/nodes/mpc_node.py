@@ -100,7 +100,7 @@ class MpcNode(Node):
         self.mpc = mpc
         self.get_logger().info(
             f"built the {cfg.name} walking MPC in {time.perf_counter() - t:.2f} s "
-            f"({settings.n_nodes} nodes x {settings.dt:g} s, {self._p('iterations')} "
+            f"({settings.n_nodes} nodes x {settings.dt:g} s, {mpc.iterations} "
             f"iteration(s)/tick, gait {g.name})")
         self.joint_names = list(mpc.model.joint_names)
         if mpc.model.nq != 7 + len(self.joint_names):
@@ -164,7 +164,8 @@ class MpcNode(Node):
         d = self._declare
         d("control_rate", 1.0 / st.dt, "MPC ticks per second of the node clock (trigger timer)",
           _range(1, 1000), ro=True)
-        d("iterations", 1, "ILQR iterations per tick", irng=[IntegerRange(
+        d("iterations", int(st.iterations), "ILQR iterations per tick (default: the config's "
+          "mpc.iterations)", irng=[IntegerRange(
             from_value=1, to_value=50, step=1)], ro=True)
         d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
           "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)

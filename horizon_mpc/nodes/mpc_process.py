@@ -87,20 +87,21 @@ class MpcProcess:
 
     Args:
         robot: robot config name, passed as the node's ``robot`` parameter.
-        iterations: ILQR iterations per tick (``iterations`` parameter).
+        iterations: ILQR iterations per tick (``iterations`` parameter; None: the config's).
         domain_id: the child's ``ROS_DOMAIN_ID`` (default: :func:`default_domain_id`).
         parameters: more ``-p name:=value`` node parameters (value written as ROS args).
         command: the program to run instead of ``python -m horizon_mpc.nodes.mpc_node``
             (e.g. a benchmark wrapper); the ROS arguments are appended to it.
     """
 
-    def __init__(self, robot: str, iterations: int = 1, domain_id: int | None = None,
+    def __init__(self, robot: str, iterations: int | None = None, domain_id: int | None = None,
                  parameters: Mapping[str, object] | None = None,
                  command: Sequence[str] | None = None) -> None:
         # diagnostics_rate 0: /diagnostics on every tick, which is how the parent counts them
-        params = {"robot": robot, "use_sim_time": True, "trigger": "timer",
-                  "iterations": int(iterations), "diagnostics_rate": 0.0,
-                  **dict(parameters or {})}
+        params: dict[str, object] = {"robot": robot, "use_sim_time": True, "trigger": "timer"}
+        if iterations is not None:  # None: the robot config's mpc.iterations
+            params["iterations"] = int(iterations)
+        params.update({"diagnostics_rate": 0.0, **dict(parameters or {})})
         self.argv = [*(command or MPC_NODE_COMMAND), "--ros-args",
                      *(a for k, v in params.items() for a in ("-p", f"{k}:={_ros_value(v)}"))]
         self.domain_id = default_domain_id() if domain_id is None else int(domain_id)

@@ -1,8 +1,9 @@
 """Node selections and per-node value arrays.
 
 Nodes are numbered 0..N (``N = n_nodes``, the number of intervals). States live on nodes
-0..N, inputs on 0..N-1. Every ``nodes=`` argument of the Problem API accepts an int, a list,
-a ``range``, a ``slice`` or None (= every node the object lives on).
+0..N, inputs on 0..N-1. Every ``nodes=`` argument of the Problem API accepts an int, a list
+or integer array, a ``range``, a ``slice``, a boolean mask with one entry per node the
+object lives on, or None (= every node the object lives on).
 """
 
 from __future__ import annotations
@@ -29,6 +30,11 @@ def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "") -> np.ndarr
         return np.arange(n_valid)[nodes]
     if isinstance(nodes, (int, np.integer)):
         idx = np.array([int(nodes)])
+    elif isinstance(nodes, np.ndarray) and nodes.dtype == bool:
+        if nodes.shape != (n_valid,):
+            raise IndexError(f"boolean node mask of shape {nodes.shape} for {what}: expected "
+                             f"({n_valid},), one entry per node 0..{n_valid - 1}")
+        return np.flatnonzero(nodes)
     elif isinstance(nodes, np.ndarray) and nodes.dtype.kind in "iu" and nodes.ndim == 1:
         idx = nodes.astype(int)  # the fast path of per-tick schedules (np.flatnonzero)
     else:
