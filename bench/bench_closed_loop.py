@@ -979,7 +979,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--realtime-factor", type=float, default=None,
                     help="diagnostics: sim s per wall s of the real-time runs (default 1)")
     ap.add_argument("--state-rate", type=float, default=None,
-                    help="diagnostics: sim_node's state publishing rate, Hz (default 500)")
+                    help="diagnostics: sim_node's state publishing rate, Hz (closed_loop's "
+                         "real-time default: 250)")
     ap.add_argument("--peer", action="store_true",
                     help="measure Crocoddyl's per-iteration time in this run (needs .venv-peer)")
     ap.add_argument("--peer-python", default=None, help="peer interpreter")
