@@ -10,7 +10,6 @@ mode needs; ``trigger: timer`` ticks at ``control_rate`` on the node's clock.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import sys
 import time
@@ -20,12 +19,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry, Path
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    SetParametersResult,
-)
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -33,8 +26,6 @@ from trajectory_msgs.msg import JointTrajectory
 
 from horizon_mpc.config import load_robot_config
 from horizon_mpc.locomotion import MpcSettings
-from horizon_mpc.locomotion.gaits import GAITS
-from horizon_mpc.locomotion.settings import Weights
 from horizon_mpc.mpc.controller import Plan, WalkingMpc
 from horizon_mpc.nodes.conversions import NS_PER_S, time_to_ns
 from horizon_mpc.nodes.mpc_inputs import (
@@ -49,21 +40,13 @@ from horizon_mpc.nodes.mpc_outputs import (
     period_ns,
     trajectory_from_plan,
 )
+from horizon_mpc.nodes.mpc_parameters import LIVE_LIMITS, MpcParameters
 from horizon_mpc.nodes.spin import spin_until_signal
 
 __all__ = ["MpcNode", "main"]
 
 _WARN_PERIOD = 2.0  # s (wall) between two warnings of the same kind
-_WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
-_LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
-_LIVE_LIMITS = ("max_vx", "max_vy", "max_wz")
-
-
-def _range(lo: float, hi: float) -> list[FloatingPointRange]:
-    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
-
-
-class MpcNode(Node):
+class MpcNode(MpcParameters, Node):
     """The MPC node. Construct after ``rclpy.init()``; spin it with any executor.
 
     ``mpc``: an already built controller to wrap (tests reuse one); its robot must match the
@@ -88,7 +71,7 @@ class MpcNode(Node):
         g = settings.gait
         g.name, g.step_duration = self._p("gait"), self._p("step_duration")
         g.step_height, g.duty_factor = self._p("step_height"), self._p("duty_factor")
-        settings.max_velocity = [self._p(n) for n in _LIVE_LIMITS]
+        settings.max_velocity = [self._p(n) for n in LIVE_LIMITS]
         settings.weights = self._weights_from_parameters(settings.weights)
 
         t = time.perf_counter()
@@ -148,99 +131,6 @@ class MpcNode(Node):
         if self.trigger == "timer":
             self._timer = self.create_timer(self.period, self.tick)
         self.get_logger().info(f"waiting for joint_states and odom (trigger: {self.trigger})")
-
-    # ------------------------------------------------------------------ parameters
-    def _declare(self, name: str, default: object, description: str,
-                 rng: list[FloatingPointRange] | None = None,
-                 irng: list[IntegerRange] | None = None, ro: bool = False) -> None:
-        desc = ParameterDescriptor(description=description, read_only=ro)
-        if rng:
-            desc.floating_point_range = rng
-        if irng:
-            desc.integer_range = irng
-        self.declare_parameter(name, default, desc)
-
-    def _declare_parameters(self, st: MpcSettings) -> None:
-        d = self._declare
-        d("control_rate", 1.0 / st.dt, "MPC ticks per second of the node clock (trigger timer)",
-          _range(1, 1000), ro=True)
-        d("iterations", int(st.iterations), "ILQR iterations per tick (default: the config's "
-          "mpc.iterations)", irng=[IntegerRange(
-            from_value=1, to_value=50, step=1)], ro=True)
-        d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
-          "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)
-        d("gait", st.gait.name, f"gait ({', '.join(GAITS)}); live")
-        d("step_duration", float(st.gait.step_duration), "swing duration (s); live",
-          _range(0.05, 2.0))
-        d("step_height", float(st.gait.step_height), "swing apex height (m); live",
-          _range(0.0, 0.3))
-        d("duty_factor", float(st.gait.duty_factor), "stance fraction of a cycle; live",
-          _range(0.05, 1.0))
-        for name, vmax, unit in zip(_LIVE_LIMITS, st.max_velocity, ("m/s", "m/s", "rad/s"),
-                                    strict=True):
-            d(name, float(vmax), f"|{name[4:]}| command limit ({unit}); live", _range(0, 5))
-        for name in _WEIGHT_FIELDS:
-            value = getattr(st.weights, name)
-            value = [float(x) for x in value] if isinstance(value, list) else float(value)
-            d(f"w_{name}", value, f"cost weight '{name}' (see MpcSettings.weights); live")
-        d("cmd_timeout", 0.5, "a cmd_vel older than this (s, node clock) means zero command",
-          _range(0.01, 60))
-        d("state_timeout", 0.2, "no plan from a state older than this (s, node clock)",
-          _range(0.001, 60))
-        d("publish_points", 6, "trajectory points published per plan (nodes 0..n-1)",
-          irng=[IntegerRange(from_value=1, to_value=1000, step=1)], ro=True)
-        d("path_rate", 10.0, "~/predicted_base_path messages per second of the node clock "
-          "(at most one per tick; 0: every tick)", _range(0, 1000), ro=True)
-        d("diagnostics_rate", 0.0, "/diagnostics messages per second of the node clock (at "
-          "most one per tick, and at once when the level rises; 0: every tick)",
-          _range(0, 1000), ro=True)
-        self._check_trigger(self._p("trigger"))
-
-    @staticmethod
-    def _check_trigger(trigger: str) -> None:
-        if trigger not in ("timer", "state"):
-            raise ValueError(f"trigger must be 'timer' or 'state', got {trigger!r}")
-
-    def _p(self, name: str) -> object:
-        return self.get_parameter(name).value
-
-    def _weights_from_parameters(self, base: Weights, changed: dict | None = None) -> Weights:
-        values = {n: (changed or {}).get(f"w_{n}", self._p(f"w_{n}")) for n in _WEIGHT_FIELDS}
-        values = {n: list(v) if isinstance(v, (list, tuple, np.ndarray)) else float(v)
-                  for n, v in values.items()}
-        return dataclasses.replace(base, **values)
-
-    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        """Validate and apply live changes (gait, limits, weights) between two ticks."""
-        new = {p.name: p.value for p in params}
-        for name, value in new.items():
-            if name == "gait" and value not in GAITS:
-                return SetParametersResult(successful=False,
-                                           reason=f"unknown gait {value!r}; gaits: {list(GAITS)}")
-            if name.startswith("w_"):
-                old = self._p(name)
-                arr = np.atleast_1d(np.asarray(value, dtype=float))
-                if arr.size != np.atleast_1d(old).size or not np.all(np.isfinite(arr)) \
-                        or np.any(arr < 0):
-                    return SetParametersResult(
-                        successful=False, reason=f"{name} needs {np.atleast_1d(old).size} "
-                        f"finite non-negative value(s), got {value!r}")
-        st = self.mpc.settings
-        if any(n in new for n in _LIVE_GAIT):
-            g = {n: new.get(n, self._p(n)) for n in _LIVE_GAIT}
-            try:
-                self.mpc.set_gait(g["gait"], g["step_duration"], g["step_height"],
-                                  g["duty_factor"])
-            except ValueError as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
-        if any(n in new for n in _LIVE_LIMITS):
-            st.max_velocity = [float(new.get(n, self._p(n))) for n in _LIVE_LIMITS]
-        if any(n.startswith("w_") for n in new):
-            st.weights = self._weights_from_parameters(st.weights, new)
-            self.mpc.wp.set_weights(st.weights)
-        if new:
-            self.get_logger().info(f"parameters updated live: {sorted(new)}")
-        return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------------ helpers
     def now(self) -> float:
