@@ -903,7 +903,7 @@ def plot_aggregate(agg: dict, path: Path) -> None:
     runs = agg["runs"]
     parts = ("state", "shift", "references", *TIMING_KEYS, "ilqr_other", "plan", "publish")
     colors = plt.get_cmap("tab10").colors
-    fig, ax = plt.subplots(figsize=(max(8.0, 0.7 * len(runs)), 4.8))
+    fig, ax = plt.subplots(figsize=(max(8.0, 0.8 * len(runs)), 5.2))
     for i, r in enumerate(runs.values()):
         bottom = 0.0
         for j, k in enumerate(parts):
@@ -919,10 +919,11 @@ def plot_aggregate(agg: dict, path: Path) -> None:
     if croc:
         ax.axhline(croc / 3, color="g", ls="-.", lw=1, label="target: Crocoddyl iteration / 3")
     ax.set_xticks(range(len(runs)), [f"{n}\nRTF {r['real_time_factor']:.2f}"
-                                     for n, r in runs.items()])
+                                     for n, r in runs.items()],
+                  fontsize=8 if len(runs) <= 6 else 6, rotation=0 if len(runs) <= 6 else 45)
     ax.set_ylabel("ms per tick (mean breakdown)")
     ax.set_title("MPC node in the closed loop: tick breakdown and percentiles")
-    ax.legend(fontsize=7, ncol=2, loc="upper right")
+    ax.legend(fontsize=7, ncol=2, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
