@@ -326,6 +326,39 @@ def test_by_default_diagnostics_go_out_every_tick(context, walking_mpc):
     node.destroy_node()
 
 
+def test_the_tick_pairs_joints_and_base_of_one_stamp(context, walking_mpc):
+    """Timer trigger: joint_states of a newer step than the last odom are not mixed with
+    it; the plan starts from the newest (joints, base) pair with one stamp, and from the
+    newest of each when no stamps match (unsynchronised drivers)."""
+    node = sim_time_node(context, walking_mpc, trigger="timer")
+    sent = Sent()
+    node._pub_traj, node._pub_path, node._pub_diag = sent, Sent(), Sent()
+    _, q = standing_configuration(node.mpc.cfg)
+    zeros, nj = np.zeros(3), len(q) - 7
+    t1, t2, t3 = 10 * NS_PER_S, 10 * NS_PER_S + 4_000_000, 10 * NS_PER_S + 9_000_000
+    bent = q[7:] + 0.05
+    node.get_clock().set_ros_time_override(RosTime(nanoseconds=t2))
+    node._on_joint_state(joint_state_to_msg(time_from_ns(t1), node.joint_names, q[7:],
+                                            np.zeros(nj)))
+    node._on_odom(odometry_to_msg(time_from_ns(t1), q[:3], q[3:7], zeros, zeros))
+    node._on_joint_state(joint_state_to_msg(time_from_ns(t2), node.joint_names, bent,
+                                            np.zeros(nj)))
+    assert node.tick()
+    assert time_to_ns(sent.msgs[-1].header.stamp) == t1
+    np.testing.assert_allclose(node.plan.q[7:, 0], q[7:], atol=1e-9)
+    # no common stamp: the newest of each, stamped with the older one
+    node.get_clock().set_ros_time_override(RosTime(nanoseconds=t3 + 20_000_000))
+    node._on_odom(odometry_to_msg(time_from_ns(t3), q[:3], q[3:7], zeros, zeros))
+    node._joints_recent.clear()
+    node._on_joint_state(joint_state_to_msg(time_from_ns(t3 + 1_000_000), node.joint_names,
+                                            bent, np.zeros(nj)))
+    node._base_recent.clear()
+    node._on_odom(odometry_to_msg(time_from_ns(t3), q[:3], q[3:7], zeros, zeros))
+    assert node.tick()
+    assert time_to_ns(sent.msgs[-1].header.stamp) == t3
+    np.testing.assert_allclose(node.plan.q[7:, 0], bent, atol=1e-9)
+
+
 def test_a_stale_state_is_not_planned_from(harness):
     h = harness(state_timeout=0.2)
     h.publish_state(age=1.0)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
@@ -46,6 +47,7 @@ from horizon_mpc.nodes.spin import spin_until_signal
 __all__ = ["MpcNode", "main"]
 
 _WARN_PERIOD = 2.0  # s (wall) between two warnings of the same kind
+_RECENT_STATES = 8  # joint_states / odom messages kept to pair them by stamp
 class MpcNode(MpcParameters, Node):
     """The MPC node. Construct after ``rclpy.init()``; spin it with any executor.
 
@@ -106,6 +108,9 @@ class MpcNode(MpcParameters, Node):
         # latest accepted inputs: (stamp ns, arrays...) / (receipt time s, cmd)
         self._joints: tuple[int, np.ndarray, np.ndarray] | None = None
         self._base: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        # the last few of each, to plan from a joints/base pair of one stamp when there is one
+        self._joints_recent: deque[tuple] = deque(maxlen=_RECENT_STATES)
+        self._base_recent: deque[tuple] = deque(maxlen=_RECENT_STATES)
         self._cmd: tuple[float, np.ndarray] | None = None
         self._cmd_timed_out = True
         self._last_tick_stamp: int | None = None
@@ -170,6 +175,7 @@ class MpcNode(MpcParameters, Node):
         for note in notes:
             self._warn("joint_states_note", note)
         self._joints = (time_to_ns(msg.header.stamp), qj, vj)
+        self._joints_recent.append(self._joints)
         self._maybe_tick_on_state()
 
     def _on_odom(self, msg: Odometry) -> None:
@@ -182,6 +188,7 @@ class MpcNode(MpcParameters, Node):
         for note in notes:
             self._warn("odom_note", note)
         self._base = (time_to_ns(msg.header.stamp), pos, quat, lin, ang)
+        self._base_recent.append(self._base)
         self._maybe_tick_on_state()
 
     def _on_cmd_vel(self, msg: Twist) -> None:
@@ -200,6 +207,18 @@ class MpcNode(MpcParameters, Node):
                 and self._joints[0] == self._base[0]:
             self.tick()
 
+    def _state_pair(self) -> tuple[tuple, tuple]:
+        """The joints and base states to plan from: the newest pair with one stamp among the
+        last few received (a simulator publishes both per step, not always in the same
+        order before a tick), else the newest of each (separate drivers, unsynchronised
+        stamps: the plan's stamp is then the older of the two)."""
+        base_stamps = {b[0]: b for b in self._base_recent}
+        for joints in reversed(self._joints_recent):
+            base = base_stamps.get(joints[0])
+            if base is not None:
+                return joints, base
+        return self._joints, self._base
+
     # ------------------------------------------------------------------ the tick
     def tick(self) -> bool:
         """One MPC tick on the latest state; returns whether a trajectory was published.
@@ -212,7 +231,8 @@ class MpcNode(MpcParameters, Node):
                        if x is None]
             self._warn("no_state", f"no {' and no '.join(missing)} received yet; not planning")
             return False
-        stamp_ns = min(self._joints[0], self._base[0])
+        joints, base = self._state_pair()
+        stamp_ns = min(joints[0], base[0])
         if stamp_ns == self._last_tick_stamp:
             return False
         t = stamp_ns / NS_PER_S
@@ -224,8 +244,8 @@ class MpcNode(MpcParameters, Node):
                        f"{self.state_timeout:g} s); not planning")
             self._publish_diagnostics(None, stamp_ns, now_ns)
             return False
-        _, qj, vj = self._joints
-        _, pos, quat, lin, ang = self._base
+        _, qj, vj = joints
+        _, pos, quat, lin, ang = base
         q = np.concatenate((pos, quat, qj))
         v = np.concatenate((lin, ang, vj))
         cmd = self.command
