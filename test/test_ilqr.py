@@ -180,6 +180,18 @@ def test_multipliers_are_updated_once_per_real_time_call(rti, expected):
     assert len(calls) == expected
 
 
+@pytest.mark.parametrize("budget, iterations, status", [
+    (None, 4, "rti"), (60.0, 4, "rti"), (1e-9, 1, "time budget")])
+def test_a_time_budget_never_starts_an_iteration_it_cannot_finish(budget, iterations, status):
+    prb, _ = build_cartpole(n_nodes=20)
+    solver = make_solver("ilqr", prb, {**OPTS, "rti": True, "iterations_per_call": 4,
+                                       "time_budget": budget})
+    solver.solve()
+    assert solver.stats.iterations == iterations  # the first iteration always runs
+    assert solver.stats.status == status
+    assert np.all(np.isfinite(solver.solution["x"]))
+
+
 def test_nan_in_the_problem_is_reported_and_never_returned():
     prb = Problem(10)
     x = prb.create_state_variable("x", 1)

@@ -359,6 +359,17 @@ def test_the_tick_pairs_joints_and_base_of_one_stamp(context, walking_mpc):
     np.testing.assert_allclose(node.plan.q[7:, 0], bent, atol=1e-9)
 
 
+def test_the_solve_budget_applies_to_timer_ticks_only(context, walking_mpc):
+    node = sim_time_node(context, walking_mpc, trigger="timer", solve_budget=0.5)
+    assert node.mpc.time_budget == pytest.approx(0.5 * node.period)
+    node.destroy_node()
+    node = sim_time_node(context, walking_mpc, trigger="state", solve_budget=0.5)
+    assert node.mpc.time_budget is None  # lockstep stays deterministic
+    node.destroy_node()
+    node = sim_time_node(context, walking_mpc, trigger="timer", solve_budget=0.0)
+    assert node.mpc.time_budget is None
+
+
 def test_a_stale_state_is_not_planned_from(harness):
     h = harness(state_timeout=0.2)
     h.publish_state(age=1.0)

@@ -121,6 +121,10 @@ class WalkingMpc:
         self._stance_set: np.ndarray | None = None  # the stance last given to the problem
         self.failures = 0
         self.divergence_threshold = 1e3  # constraint violation above which a tick has failed
+        # wall-clock budget of a tick's solve (s; None: none): the iterations after the first
+        # are skipped when they would not end within it (real-time use; the bootstrap solve
+        # ignores it)
+        self.time_budget: float | None = None
 
     # ------------------------------------------------------------------ set-up
     def start(self, q: np.ndarray, v: np.ndarray, t: float = 0.0,
@@ -142,6 +146,7 @@ class WalkingMpc:
         self._set_references(t)
         self.solver.set_option("rti", False)
         self.solver.set_option("max_iter", max_iter)
+        self.solver.set_option("time_budget", None)
         self.solver.solve()
         self.solver.set_option("rti", True)
         self._standing = {n: wp.prb.get_variable(n).initial_guess for n in ("q", "v", "a", "f")}
@@ -197,6 +202,7 @@ class WalkingMpc:
         return self._plan(t)
 
     def _solve(self) -> bool:
+        self.solver.set_option("time_budget", self.time_budget)
         self.solver.solve()
         sol = self.solver.solution
         finite = bool(sol) and all(np.all(np.isfinite(sol[k])) for k in ("q", "v", "a", "f"))

@@ -96,6 +96,10 @@ class MpcNode(MpcParameters, Node):
         self.publish_points = min(self._p("publish_points"), settings.n_nodes)
         mpc.prepare_inverse_dynamics(self.publish_points)  # compiled now, not in a tick
         self.trigger = self._p("trigger")
+        budget = self._p("solve_budget")
+        # lockstep (trigger 'state') stays deterministic: no wall-clock budget there
+        mpc.time_budget = (budget * self.period if self.trigger == "timer" and budget > 0
+                           else None)
         # the predicted path and the diagnostics may go out at lower rates than the ticks
         self._path_period_ns = period_ns(self._p("path_rate"))
         self._diag_period_ns = period_ns(self._p("diagnostics_rate"))

@@ -58,7 +58,9 @@ class IlqrSolver(Solver):
     ``tol_constraint`` (defects, constraints, bounds; inf-norm); ``mu_init``/``mu_min``/
     ``mu_max`` (regularisation); ``rho_init``/``rho_factor``/``rho_max`` (AL penalty; fixed
     at its current value in ``rti`` mode);
-    ``line_search_steps`` (number of halvings); ``time_budget`` (s per call, None: none);
+    ``line_search_steps`` (number of halvings); ``time_budget`` (s per call, None: none; an
+    iteration is not started when the previous one's duration would take the call past it,
+    the first always runs; ``stats.status`` is then ``'time budget'``);
     ``codegen`` (compile the node functions); ``callback`` (called with a dict per iteration);
     ``equality``: ``'projection'`` (equality rows handled exactly in the backward pass,
     see :mod:`.equality`; rows that do not fit a node's inputs use the augmented
@@ -344,6 +346,7 @@ class IlqrSolver(Solver):
         n_iter = int(o["iterations_per_call"]) if rti else int(o["max_iter"])
         history, status, converged = [], "max_iter", False
         it = 0
+        t_iter = time.perf_counter()  # start of the current iteration
         for it in range(1, n_iter + 1):
             ev, info = self._iterate(ev)
             stationary = abs(info.get("expected", 0.0)) <= o["tol"] * (1.0 + ev["cost"]) or (
@@ -378,11 +381,16 @@ class IlqrSolver(Solver):
             if info.get("linearisation_failed"):
                 status = "linearisation not finite (NaN/Inf) at every regularisation"
                 break
-            if o["time_budget"] is not None and time.perf_counter() - t_start > o["time_budget"]:
+            # never start an iteration that would not end within the budget (its cost
+            # estimated by the last one's)
+            now = time.perf_counter()
+            if o["time_budget"] is not None and it < n_iter and (
+                    2 * now - t_iter - t_start > o["time_budget"]):
                 status = "time budget"
                 break
+            t_iter = now
         if rti:
-            status = "rti"
+            status = "rti" if status != "time budget" else status
             converged = ev["viol"] <= max(o["tol_constraint"], 1e-3) and np.isfinite(ev["cost"])
         self.stats.iterations = it
         self.stats.status = status
