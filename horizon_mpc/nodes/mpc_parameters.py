@@ -55,7 +55,7 @@ class MpcParameters:
         d("iterations", int(st.iterations), "ILQR iterations per tick (default: the config's "
           "mpc.iterations)", irng=[IntegerRange(
             from_value=1, to_value=50, step=1)], ro=True)
-        d("solve_budget", 0.7, "with trigger 'timer': the ILQR iterations after the first "
+        d("solve_budget", 0.85, "with trigger 'timer': the ILQR iterations after the first "
           "are skipped when they would end later than this fraction of the control period "
           "after the solve started (0: always run them all)", _range(0, 10), ro=True)
         d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
