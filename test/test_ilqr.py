@@ -270,3 +270,47 @@ def test_unknown_equality_mode_is_refused():
     prb, _, _ = _lq_problem()
     with pytest.raises(ValueError, match="equality"):
         make_solver("ilqr", prb, {**OPTS, "equality": "barrier"})
+
+
+def _cartpole_with_input_equality(n_nodes: int = 30):
+    """Cart-pole whose force follows a state-dependent law on the first third of the
+    horizon: an input-dependent equality (the projection's kind of row)."""
+    prb, var = build_cartpole(n_nodes=n_nodes)
+    law = prb.create_constraint("force_law", var["u"] - 2.0 * var["v"][0],
+                                nodes=range(n_nodes // 3))
+    return prb, law
+
+
+def test_the_lean_quadratisation_leaves_out_only_zero_weight_terms():
+    prb, _ = _cartpole_with_input_equality()
+    solver = make_solver("ilqr", prb, OPTS)
+    m = solver.model
+    assert not m.al_rows[:m.nc_con].all() and m.al_rows[m.nc_con:].all()
+    full = m.quadratise_full()
+    rng = np.random.default_rng(3)
+    N = m.n_nodes
+    args = [rng.standard_normal((m.nx, N)), rng.standard_normal((m.nu, N)),
+            np.zeros((prb.ns, 1)), np.zeros((prb.np_, N)), rng.random((m.nr, N)),
+            rng.random((m.nc, N)) * m.al_rows[:, None], rng.standard_normal((m.nc, N))]
+    for lean_out, full_out in zip(m.quadratise(*args), full(*args), strict=True):
+        np.testing.assert_allclose(np.asarray(lean_out), np.asarray(full_out), rtol=1e-12,
+                                   atol=1e-12)
+
+
+def test_a_left_out_equality_made_an_inequality_gets_its_terms_back():
+    prb, law = _cartpole_with_input_equality()
+    solver = make_solver("ilqr", prb, OPTS)
+    solver.solve()
+    assert solver._quadratise_fn is solver._quadratise_lean
+    law.set_bounds(-50.0, 50.0)  # no longer an equality: the augmented Lagrangian's now
+    assert solver.solve()
+    assert solver._quadratise_fn is solver._quadratise_all
+    sol = solver.solution
+    residual = sol["u"][0, :10] - 2.0 * sol["v"][0, :10]
+    assert np.all(np.abs(residual) <= 50.0 + 1e-6)
+    # the same optimum as with every row in the augmented Lagrangian from the start
+    ref_prb, ref_law = _cartpole_with_input_equality()
+    ref_law.set_bounds(-50.0, 50.0)
+    ref = make_solver("ilqr", ref_prb, {**OPTS, "equality": "lagrangian"})
+    assert ref.solve()
+    assert solver.stats.cost == pytest.approx(ref.stats.cost, rel=1e-6)

@@ -93,16 +93,17 @@ class IlqrSolver(Solver):
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
-        self.model = build_stage_model(prb, codegen=bool(self.opts["codegen"]))
+        if self.opts["equality"] not in ("projection", "lagrangian"):
+            raise ValueError(f"ilqr option 'equality' must be 'projection' or 'lagrangian', "
+                             f"got {self.opts['equality']!r}")
+        self.model = build_stage_model(prb, codegen=bool(self.opts["codegen"]),
+                                       projected_equalities=self.opts["equality"] == "projection")
         m = self.model
         N = m.n_nodes
         self._al = AugmentedLagrangian(np.full((N, m.nc), -np.inf), np.full((N, m.nc), np.inf),
                                        self.opts["rho_init"])
         self._alN = AugmentedLagrangian(np.full((1, m.ncN), -np.inf),
                                         np.full((1, m.ncN), np.inf), self.opts["rho_init"])
-        if self.opts["equality"] not in ("projection", "lagrangian"):
-            raise ValueError(f"ilqr option 'equality' must be 'projection' or 'lagrangian', "
-                             f"got {self.opts['equality']!r}")
         self._layout = EqualityLayout.empty(N, m.nc_con, m.ncN_con)
         self._eq_rows = self._layout.stage_rows()
         self._uses_input = np.concatenate(
@@ -113,7 +114,8 @@ class IlqrSolver(Solver):
         # overwritten by the next call of the same function
         self._values = BufferedFunction(m.values)
         self._values_term = BufferedFunction(m.values_term)
-        self._quadratise_fn = BufferedFunction(m.quadratise)
+        self._quadratise_fn = self._quadratise_lean = BufferedFunction(m.quadratise)
+        self._quadratise_all: BufferedFunction | None = None  # every row's AL terms, on demand
         self._quadratise_term = BufferedFunction(m.quadratise_term)
         self._integrate = BufferedFunction(m.integrate)
         # the Riccati recursion in compiled C when available (numpy loop otherwise)
@@ -172,8 +174,24 @@ class IlqrSolver(Solver):
             lbN[0, :ncN][self._layout.term], ubN[0, :ncN][self._layout.term] = -np.inf, np.inf
         self._al.set_bounds(lb, ub)
         self._alN.set_bounds(lbN, ubN)
+        self._choose_quadratisation(lb[:, :m.nc_con], ub[:, :m.nc_con])
         self.Wr = self._weights(m.stage_costs, N, slice(0, N))  # (N, nr)
         self.WrN = self._weights(m.term_costs, 1, slice(N, N + 1))  # (1, nrN)
+
+    def _choose_quadratisation(self, lb: np.ndarray, ub: np.ndarray) -> None:
+        """The lean quadratisation (no AL terms for the projected equalities) unless a row it
+        leaves out is in the augmented Lagrangian now (lb, ub: (N, nc_con) AL bounds)."""
+        left_out = ~self.model.al_rows[:lb.shape[1]]
+        needed = (np.isfinite(lb[:, left_out]) | np.isfinite(ub[:, left_out])).any()
+        if not needed:
+            self._quadratise_fn = self._quadratise_lean
+            return
+        if self._quadratise_all is None:
+            log.info("ilqr: a constraint row left out of the lean quadratisation (an equality "
+                     "the projection was to handle) is in the augmented Lagrangian now: "
+                     "building the quadratisation with every row")
+            self._quadratise_all = BufferedFunction(self.model.quadratise_full())
+        self._quadratise_fn = self._quadratise_all
 
     @staticmethod
     def _weights(costs, n: int, nodes) -> np.ndarray:
