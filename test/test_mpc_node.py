@@ -407,6 +407,7 @@ def test_bad_inputs_are_counted_and_do_not_kill_the_node(harness):
 
 def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):
     h = harness()
+    max_vx = h.node.mpc.settings.max_velocity[0]
     res = h.node.set_parameters([Parameter("gait", value="walk"),
                                  Parameter("w_posture", value=2.0),
                                  Parameter("max_vx", value=0.4)])
@@ -417,7 +418,7 @@ def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):
     assert not h.node.set_parameters([Parameter("gait", value="moonwalk")])[0].successful
     assert not h.node.set_parameters([Parameter("robot", value="solo12")])[0].successful
     h.node.set_parameters([Parameter("gait", value="trot"), Parameter("w_posture", value=1.0),
-                           Parameter("max_vx", value=1.0)])
+                           Parameter("max_vx", value=max_vx)])
 
 
 def test_sigterm_exits_cleanly_with_code_0():

@@ -55,7 +55,9 @@ class MpcSettings:
     weights: Weights = field(default_factory=Weights)
     clearance: str = "cost"  # 'cost', 'constraint' or 'none'
     torque_limits: bool = True
-    max_velocity: list[float] = field(default_factory=lambda: [1.0, 0.5, 1.0])  # vx, vy, wz
+    # command limits vx, vy (m/s), wz (rad/s): what the go2 trot sustains in the lockstep
+    # sweep of doc/locomotion.md (0.8-1.0 m/s forward and 1.0 rad/s while walking fell)
+    max_velocity: list[float] = field(default_factory=lambda: [0.6, 0.5, 0.8])
     max_acceleration: list[float] = field(default_factory=lambda: [1.0, 1.0, 2.0])
     stand_when_idle: bool = True
     rho_init: float = 100.0
