@@ -182,7 +182,10 @@ def walk(go2):
 def test_pinocchio_dynamics_reproduce_the_states_and_the_base_wrench_vanishes(motion, request):
     res, _, model, *_ = request.getfixturevalue(motion)
     check = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
-    assert check["max_defect"] <= 1e-6
+    # the walk's states are its ticks' node 1: 3 real-time ILQR iterations close each gap to
+    # second order, not exactly (measured: p99 1.5e-8, max 2.8e-6 over 200 ticks; the offline
+    # NLP motions ~1e-14); an error in the dynamics shows at 1e-4 and above (next test)
+    assert check["max_defect"] <= (1e-5 if motion == "walk" else 1e-6)
     # one millionth of the robot's weight (the defects above integrate with zero base torque)
     assert check["max_base_wrench"] <= 1e-6 * model.mass * G
 
