@@ -499,3 +499,28 @@ def test_iterations_per_tick_default_to_the_config_and_are_validated():
     assert mpc.iterations == 2 and mpc.solver.opts["iterations_per_call"] == 2
     with pytest.raises(ValueError, match="iterations per tick must be >= 1"):
         WalkingMpc("go2", iterations=0)
+
+
+def test_a_tick_off_the_node_grid_moves_the_warm_start_by_the_fraction(walking_mpc):
+    """Half a node later, each node's guess is halfway to the next node's (states on their
+    manifold, inputs linearly); the last node keeps its own; on the grid nothing moves."""
+    mpc = walking_mpc
+    prb, N = mpc.wp.prb, mpc.wp.n_nodes
+    q = prb.get_variable("q")
+    a = prb.get_variable("a")
+    q0 = mpc.wp.q_nominal.copy()
+    k = np.arange(N + 1)
+    Q = np.repeat(q0[:, None], N + 1, axis=1)
+    Q[7:] += 0.01 * k  # joints moving linearly along the horizon
+    q.set_initial_guess(Q)
+    A = np.outer(np.ones(a.dim), np.arange(N, dtype=float))
+    a.set_initial_guess(A)
+    mpc._shift_fraction(0.01)  # within the tolerance: unchanged
+    np.testing.assert_array_equal(q.initial_guess, Q)
+    mpc._shift_fraction(0.5)
+    np.testing.assert_allclose(q.initial_guess[7:, :N], Q[7:, :N] + 0.005, atol=1e-12)
+    np.testing.assert_allclose(q.initial_guess[:7, :N], Q[:7, :N], atol=1e-12)
+    np.testing.assert_array_equal(q.initial_guess[:, N], Q[:, N])
+    np.testing.assert_allclose(a.initial_guess[:, :N - 1], A[:, :N - 1] + 0.5, atol=1e-12)
+    mpc._shift_fraction(-0.5)  # back: interior nodes where they were
+    np.testing.assert_allclose(q.initial_guess[7:, 1:N], Q[7:, 1:N], atol=1e-12)

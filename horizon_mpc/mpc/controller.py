@@ -125,6 +125,7 @@ class WalkingMpc:
         # are skipped when they would not end within it (real-time use; the bootstrap solve
         # ignores it)
         self.time_budget: float | None = None
+        self._interp: tuple[BufferedFunction, BufferedFunction] | None = None  # on first use
 
     # ------------------------------------------------------------------ set-up
     def start(self, q: np.ndarray, v: np.ndarray, t: float = 0.0,
@@ -189,6 +190,9 @@ class WalkingMpc:
         else:
             for _ in range(n_shift):
                 self.solver.shift()
+            # a tick off the node grid (real time: a timer on one clock, states on another)
+            # moves the warm start by the rest too, so its nodes sit at t + k dt
+            self._shift_fraction(dt_tick / self.wp.settings.dt - n_shift)
         self.t_last = t
         self.scheduler.command(t, bool(np.any(np.abs(self.cmd) > 1e-3)) or bool(
             cmd is not None and np.any(np.abs(cmd) > 1e-3)))
@@ -230,6 +234,28 @@ class WalkingMpc:
         # the warm start's first node is the measured state (the gap closes in one step)
         self.wp.q.set_initial_guess(q, nodes=0)
         self.wp.v.set_initial_guess(v, nodes=0)
+
+    def _shift_fraction(self, r: float, tol: float = 0.05) -> None:
+        """Move the warm start by ``r`` nodes (|r| <= 1/2): each node's state and input are
+        interpolated toward the next node's (r > 0) or the previous one's (r < 0), states
+        on their manifold (``x (+) |r| (x' (-) x)``). Below ``tol`` nothing moves (lockstep
+        ticks sit on the grid to rounding)."""
+        if abs(r) < tol:
+            return
+        prb, N = self.wp.prb, self.wp.n_nodes
+        if self._interp is None:
+            self._interp = (BufferedFunction(prb.state_difference().map(N)),
+                            BufferedFunction(prb.state_integrate().map(N)))
+        diff, integ = self._interp
+        X, U = prb.stacked("state"), prb.stacked("input")
+        a, b = (slice(0, N), slice(1, N + 1)) if r > 0 else (slice(1, N + 1), slice(0, N))
+        X_new = X.copy()
+        X_new[:, a] = integ(X[:, a], abs(r) * diff(X[:, a], X[:, b])[0])[0]
+        U_new = U.copy()
+        ua, ub = (slice(0, N - 1), slice(1, N)) if r > 0 else (slice(1, N), slice(0, N - 1))
+        U_new[:, ua] = U[:, ua] + abs(r) * (U[:, ub] - U[:, ua])
+        prb.set_stacked_initial_guess("state", X_new)
+        prb.set_stacked_initial_guess("input", U_new)
 
     def _restore_standing(self, q: np.ndarray) -> None:
         self.wp.standing_guess(q)
