@@ -29,7 +29,7 @@ from typing import Any
 
 import yaml
 
-__all__ = ["RobotConfig", "SimGains", "config_dirs", "load_robot_config"]
+__all__ = ["RobotConfig", "SimGains", "config_dirs", "find_config_file", "load_robot_config"]
 
 
 @dataclass
@@ -78,20 +78,28 @@ def config_dirs() -> list[Path]:
     return dirs
 
 
-def _find_config(name_or_path: str | Path) -> Path:
+def find_config_file(name_or_path: str | Path, what: str = "robot config",
+                     subdir: str = "") -> Path:
+    """The YAML file of a config: ``name_or_path`` itself when it ends in ``.yaml``/``.yml``,
+    else ``<dir>/<subdir>/<name>.yaml`` in the first of :func:`config_dirs` that has it.
+
+    Raises:
+        FileNotFoundError: no such file (the message names ``what`` and lists the available
+            names).
+    """
     p = Path(name_or_path)
     if p.suffix in (".yaml", ".yml"):
         if not p.is_file():
-            raise FileNotFoundError(f"robot config file {str(p)!r} does not exist")
+            raise FileNotFoundError(f"{what} file {str(p)!r} does not exist")
         return p
-    for d in config_dirs():
+    dirs = [d / subdir if subdir else d for d in config_dirs()]
+    for d in dirs:
         candidate = d / f"{name_or_path}.yaml"
         if candidate.is_file():
             return candidate
-    available = sorted({c.stem for d in config_dirs() if d.is_dir() for c in d.glob("*.yaml")})
-    raise FileNotFoundError(
-        f"no config for robot {str(name_or_path)!r}; robot configs available: {', '.join(available)}"
-    )
+    available = sorted({c.stem for d in dirs if d.is_dir() for c in d.glob("*.yaml")})
+    raise FileNotFoundError(f"no {what} {str(name_or_path)!r}; available: "
+                            f"{', '.join(available) or 'none'}")
 
 
 _KNOWN = {"robot", "urdf_path", "base_link", "feet", "nominal_posture", "nominal_joints",
@@ -115,7 +123,7 @@ def load_robot_config(name_or_path: str | Path) -> RobotConfig:
         FileNotFoundError: no such config (the message lists the available ones).
         ValueError: the file is not a mapping or lacks ``feet``/a robot source.
     """
-    path = _find_config(name_or_path)
+    path = find_config_file(name_or_path)
     with open(path, encoding="utf-8") as fh:
         data = yaml.safe_load(fh)
     if not isinstance(data, dict):

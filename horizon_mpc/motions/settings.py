@@ -21,7 +21,7 @@ from typing import Any, TypeVar
 
 import yaml
 
-from horizon_mpc.config import config_dirs
+from horizon_mpc.config import find_config_file
 
 __all__ = ["MotionConfig", "load_motion_config"]
 
@@ -56,22 +56,6 @@ class MotionConfig:
         return cls(**values)
 
 
-def _find(motion: str | Path) -> Path:
-    p = Path(motion)
-    if p.suffix in (".yaml", ".yml"):
-        if not p.is_file():
-            raise FileNotFoundError(f"motion config file {str(p)!r} does not exist")
-        return p
-    for d in config_dirs():
-        candidate = d / "motions" / f"{motion}.yaml"
-        if candidate.is_file():
-            return candidate
-    available = sorted({c.stem for d in config_dirs() if (d / "motions").is_dir()
-                        for c in (d / "motions").glob("*.yaml")})
-    raise FileNotFoundError(f"no motion config {str(motion)!r}; available: "
-                            f"{', '.join(available) or 'none'}")
-
-
 def load_motion_config(motion: str | Path) -> MotionConfig:
     """Load ``config/motions/<motion>.yaml`` (or the YAML file at ``motion``).
 
@@ -79,7 +63,7 @@ def load_motion_config(motion: str | Path) -> MotionConfig:
         FileNotFoundError: no such file (the message lists the available motions).
         ValueError: not a mapping, or unknown top-level keys.
     """
-    path = _find(motion)
+    path = find_config_file(motion, "motion config", subdir="motions")
     with open(path, encoding="utf-8") as fh:
         data = yaml.safe_load(fh) or {}
     if not isinstance(data, dict):

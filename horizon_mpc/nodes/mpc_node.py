@@ -110,9 +110,8 @@ class MpcNode(MpcParameters, Node):
         self._diag = DiagnosticsMessage(f"{self.get_name()}: walking MPC", mpc.cfg.name)
 
         # latest accepted inputs: (stamp ns, arrays...) / (receipt time s, cmd)
-        self._joints: tuple[int, np.ndarray, np.ndarray] | None = None
-        self._base: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
-        # the last few of each, to plan from a joints/base pair of one stamp when there is one
+        # the last few of each, (stamp ns, arrays...), to plan from a joints/base pair of one
+        # stamp when there is one
         self._joints_recent: deque[tuple] = deque(maxlen=_RECENT_STATES)
         self._base_recent: deque[tuple] = deque(maxlen=_RECENT_STATES)
         self._cmd: tuple[float, np.ndarray] | None = None
@@ -178,8 +177,7 @@ class MpcNode(MpcParameters, Node):
             return
         for note in notes:
             self._warn("joint_states_note", note)
-        self._joints = (time_to_ns(msg.header.stamp), qj, vj)
-        self._joints_recent.append(self._joints)
+        self._joints_recent.append((time_to_ns(msg.header.stamp), qj, vj))
         self._maybe_tick_on_state()
 
     def _on_odom(self, msg: Odometry) -> None:
@@ -191,8 +189,7 @@ class MpcNode(MpcParameters, Node):
             return
         for note in notes:
             self._warn("odom_note", note)
-        self._base = (time_to_ns(msg.header.stamp), pos, quat, lin, ang)
-        self._base_recent.append(self._base)
+        self._base_recent.append((time_to_ns(msg.header.stamp), pos, quat, lin, ang))
         self._maybe_tick_on_state()
 
     def _on_cmd_vel(self, msg: Twist) -> None:
@@ -210,6 +207,16 @@ class MpcNode(MpcParameters, Node):
         if self.trigger == "state" and self._joints is not None and self._base is not None \
                 and self._joints[0] == self._base[0]:
             self.tick()
+
+    @property
+    def _joints(self) -> tuple | None:
+        """The newest accepted joint state (stamp ns, q, v), or None."""
+        return self._joints_recent[-1] if self._joints_recent else None
+
+    @property
+    def _base(self) -> tuple | None:
+        """The newest accepted base state (stamp ns, position, quaternion, linear, angular)."""
+        return self._base_recent[-1] if self._base_recent else None
 
     def _state_pair(self) -> tuple[tuple, tuple]:
         """The joints and base states to plan from: the newest pair with one stamp among the

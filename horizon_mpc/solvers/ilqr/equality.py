@@ -272,7 +272,6 @@ def _qr_solve(W_flat: np.ndarray, rows: np.ndarray, nu: int, rtol: float,
     W_flat, rows: as :func:`_stack_rows` returns them.
     """
     n, m = rows.shape
-    count = np.count_nonzero(rows, axis=1)
     if compiled:
         from horizon_mpc.solvers.ilqr import riccati_c
 
@@ -280,7 +279,7 @@ def _qr_solve(W_flat: np.ndarray, rows: np.ndarray, nu: int, rtol: float,
         sol = _Solution(P_x, P_e, Z, free, pinv, unmet)
         fb = np.flatnonzero(~ok)
     else:
-        sol, fb = _qr_solve_numpy(W_flat, rows, count, nu, rtol)
+        sol, fb = _qr_solve_numpy(W_flat, rows, nu, rtol)
     if fb.size:
         W = W_flat[:-1].reshape(n, m, -1)
         part = _svd_solve(W[fb] * rows[fb][..., None], nu, rtol)
@@ -289,10 +288,11 @@ def _qr_solve(W_flat: np.ndarray, rows: np.ndarray, nu: int, rtol: float,
     return sol
 
 
-def _qr_solve_numpy(W_flat: np.ndarray, rows: np.ndarray, count: np.ndarray, nu: int,
+def _qr_solve_numpy(W_flat: np.ndarray, rows: np.ndarray, nu: int,
                     rtol: float) -> tuple[_Solution, np.ndarray]:
     """:func:`_qr_solve` in batched numpy; also returns the nodes left to the SVD."""
     n, m = rows.shape
+    count = np.count_nonzero(rows, axis=1)
     sel = np.flatnonzero((count > 0) & (count <= nu))
     ok = np.ones(0, bool)
     if sel.size:

@@ -204,9 +204,9 @@ class IlqrSolver(Solver):
         """(n, rows) weight of each residual row on ``nodes`` (0 where its cost is off)."""
         if not costs:
             return np.zeros((n, 0))
-        active = np.array([c._active[nodes] for c in costs], dtype=float)  # (costs, n)
+        active = np.array([c.active[nodes] for c in costs], dtype=float)  # (costs, n)
         dims = [c.dim for c in costs]
-        return active.T.repeat(dims, axis=1) * np.concatenate([c._weight for c in costs])
+        return active.T.repeat(dims, axis=1) * np.concatenate([c.weight for c in costs])
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate(self, X: np.ndarray, U: np.ndarray) -> dict[str, Any] | None:
