@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import rclpy
+import yaml
 from geometry_msgs.msg import Twist
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -81,6 +82,8 @@ class Recording:
     contact: list[np.ndarray] = field(default_factory=list)  # (n_feet,) bool
     tick_t: list[float] = field(default_factory=list)  # state time of each MPC tick
     tick_time: list[float] = field(default_factory=list)  # wall s of each tick's solve
+    # wall s of the next tick's preparation after each tick (0 without prepare_ahead)
+    prepare_time: list[float] = field(default_factory=list)
     tick_iterations: list[float] = field(default_factory=list)
     plan_t: list[float] = field(default_factory=list)  # stamp of each plan the sim got
     plan_age: list[float] = field(default_factory=list)  # sim time at receipt - stamp (s)
@@ -97,6 +100,7 @@ class Recording:
     def arrays(self) -> dict[str, np.ndarray]:
         """The per-period lists as arrays (rows = time)."""
         names = ("t", "q", "v", "cmd", "cmd_mpc", "contact", "tick_t", "tick_time",
+                 "prepare_time",
                  "tick_iterations", "plan_t", "plan_age")
         return {n: np.asarray(getattr(self, n)) for n in names}
 
@@ -112,10 +116,11 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
 
     ``pushes`` are applied to the simulated base (ground truth, not through ROS).
 
+    ``mpc_parameters``: more ``mpc_node`` parameters (name -> value).
+
     Real-time mode only (``doc/closed_loop.md``): ``domain_id`` is the ``ROS_DOMAIN_ID`` of
     the run (default: the environment's, else a private one derived from this process id,
-    :func:`~horizon_mpc.nodes.mpc_process.default_domain_id`); ``mpc_parameters`` are
-    more ``mpc_node`` parameters; ``mpc_command`` replaces ``python -m
+    :func:`~horizon_mpc.nodes.mpc_process.default_domain_id`); ``mpc_command`` replaces ``python -m
     horizon_mpc.nodes.mpc_node`` as the MPC process's program (a benchmark's wrapper);
     ``ready_timeout`` (s, wall) bounds the wait for the MPC process's readiness and for its
     first plan. Raises :class:`~horizon_mpc.nodes.mpc_process.MpcProcessError` (with the end
@@ -129,7 +134,7 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
     load_robot_config(robot)  # an unknown robot fails here, before any node or process
     loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
     if mode == "lockstep":
-        return _run_lockstep(robot, iterations, loop)
+        return _run_lockstep(robot, iterations, loop, mpc_parameters)
     return _run_realtime(robot, iterations, loop, domain_id, mpc_parameters, mpc_command,
                          ready_timeout)
 
@@ -178,7 +183,8 @@ class _Loop:
             self.fell_at is not None and t - self.fell_at >= self.stop_after_fall)
 
 
-def _run_lockstep(robot: str, iterations: int | None, loop: _Loop) -> Recording:
+def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
+                  mpc_parameters: Mapping[str, object] | None = None) -> Recording:
     """One process, one executor: the simulator waits for each plan (deterministic)."""
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
@@ -188,7 +194,8 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop) -> Recording:
         mpc = MpcNode(context=ctx, parameter_overrides=[
             Parameter("robot", value=robot), Parameter("use_sim_time", value=True),
             Parameter("trigger", value="state"),
-            *([] if iterations is None else [Parameter("iterations", value=int(iterations))])])
+            *([] if iterations is None else [Parameter("iterations", value=int(iterations))]),
+            *(Parameter(k, value=v) for k, v in (mpc_parameters or {}).items())])
         rec.build_time = time.perf_counter() - t_build
         dt = mpc.mpc.settings.dt
         sim = SimNode(context=ctx, parameter_overrides=[
@@ -214,6 +221,7 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop) -> Recording:
                 ticks_seen = mpc.ticks
                 rec.tick_t.append(mpc.plan.t0)
                 rec.tick_time.append(mpc.last_solve_time)
+                rec.prepare_time.append(mpc.last_prepare_time)
                 rec.tick_iterations.append(mpc.plan.stats.get("iterations", math.nan))
                 rec.plan_t.append(mpc.plan.t0)
                 rec.plan_age.append(now_ns / 1e9 - mpc.plan.t0)
@@ -330,6 +338,7 @@ def _realtime_loop(executor: SingleThreadedExecutor, sim: SimNode, monitor: MpcM
 def _copy_ticks(heard: TickRecord, rec: Recording) -> None:
     """The MPC process's ticks and plans, as heard through ROS, into the recording."""
     rec.tick_t, rec.tick_time = list(heard.tick_t), list(heard.tick_time)
+    rec.prepare_time = list(heard.prepare_time)
     rec.tick_iterations = list(heard.iterations)
     rec.plan_t, rec.plan_age = list(heard.plan_t), list(heard.plan_age)
     rec.deadline_misses = int(heard.counters["deadline_misses"])
@@ -362,6 +371,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="ILQR iterations per tick (default: the robot config's mpc.iterations)")
     ap.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
                     help="render a GIF (every 50 ms of sim time)")
+    ap.add_argument("-p", "--mpc-param", action="append", default=[], metavar="NAME=VALUE",
+                    help="an mpc_node parameter (YAML value), e.g. -p prepare_ahead=true; "
+                    "repeatable")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = ap.parse_args(remove_ros_args(["closed_loop", *argv])[1:])  # tolerate --ros-args
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
@@ -371,9 +383,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     segments = load_profile(profile)
     pushes = load_pushes(profile)
     log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, profile)
+    mpc_parameters = {}
+    for item in args.mpc_param:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            ap.error(f"--mpc-param needs NAME=VALUE, got {item!r}")
+        mpc_parameters[name] = yaml.safe_load(value)
     try:
         rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
-                  pushes=pushes)
+                  pushes=pushes, mpc_parameters=mpc_parameters)
     except MpcProcessError as exc:
         log.error("%s", exc)
         return 1

@@ -58,6 +58,7 @@ def _ticks(d: dict[str, np.ndarray], t0: float, t1: float, period: float,
     and control periods without a tick (from the ticks' stamps), solve time percentiles
     (the first tick, the bootstrap solve, apart), deadline misses, plan age."""
     tick_t, tick = d["tick_t"], d["tick_time"]
+    prepare = d["prepare_time"] if d["prepare_time"].size == tick.size else np.zeros(tick.size)
     span = t1 - t0 + period  # the control periods recorded, both ends included
     inside = int(np.count_nonzero((tick_t >= t0 - 1e-9) & (tick_t <= t1 + 1e-9)))
     expected = span / period if period > 0 else math.nan
@@ -68,6 +69,8 @@ def _ticks(d: dict[str, np.ndarray], t0: float, t1: float, period: float,
         "periods_without_tick_percent": 100.0 * max(expected - inside, 0.0) / expected
         if expected > 0 else math.nan,
         "tick_time_ms": _percentiles(tick[1:]),
+        # a tick's latency plus the preparation of the next after it: what must fit a period
+        "tick_work_ms": _percentiles(tick[1:] + np.nan_to_num(prepare[1:tick.size])),
         "bootstrap_ms": float(tick[0] * 1e3) if tick.size else math.nan,
         "deadline_misses": deadline_misses,
         "deadline_miss_percent": 100.0 * deadline_misses / solves if solves else math.nan,

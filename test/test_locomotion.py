@@ -195,3 +195,43 @@ def test_the_plans_stats_are_the_solver_stats_without_the_history(walking_mpc):
     expected = walking_mpc.solver.stats.as_dict()
     expected.pop("history")
     assert plan.stats == expected
+
+
+def test_prepared_ticks_are_feedback_steps_that_trot_a_perfect_model(walking_mpc):
+    """prepare() after each tick, then the tick at the prepared time: every tick is the
+    feedback step alone, the plans stay consistent and the base moves with the command."""
+    import pinocchio as pin
+
+    from horizon_mpc.posture import standing_configuration
+
+    mpc = walking_mpc
+    _, q0 = standing_configuration(mpc.cfg)
+    mpc.t_last = None
+    plan = mpc.start(q0, np.zeros(mpc.model.nv), 0.0)
+    dt, cmd = mpc.settings.dt, np.array([0.3, 0.0, 0.0])
+    misses, violations = mpc.prepare_misses, []
+    for k in range(1, 41):
+        assert mpc.prepare(k * dt, cmd)
+        plan = mpc.update(k * dt, plan.q[:, 1], plan.v[:, 1], cmd)
+        assert mpc.solver.stats.status == "feedback" and plan.t0 == k * dt
+        assert plan.stats["iterations"] == mpc.iterations
+        violations.append(plan.stats["constraint_violation"])
+    assert mpc.prepare_misses == misses
+    # the start of the gait (new swing constraints) is not feasible at once; after it the
+    # ticks stay within what whole ticks reach (<= 0.53 at lift-offs, 1e-3 between)
+    assert max(violations[10:]) < 1.0 and np.median(violations) < 1e-2
+    assert plan.q[0, 0] - q0[0] > 0.15  # 0.8 s, with the 1 m/s^2 ramp to 0.3 m/s
+    # a state stamped 3 ms before the prepared time is predicted to it
+    t_next = 41 * dt
+    assert mpc.prepare(t_next, cmd)
+    q, v = plan.q[:, 1].copy(), plan.v[:, 1].copy()
+    plan = mpc.update(t_next - 0.003, q, v, cmd)
+    assert plan.t0 == t_next
+    if mpc.solver.stats.history[0]["alpha"] == 1.0:
+        np.testing.assert_allclose(plan.q[:, 0], pin.integrate(mpc.model.pin_model, q, 0.003 * v),
+                                   atol=1e-9)
+    # 10 ms away (beyond max_extrapolation): a whole tick from the state's own time
+    assert mpc.prepare(t_next + dt, cmd)
+    plan = mpc.update(t_next + dt + 0.010, plan.q[:, 1], plan.v[:, 1], cmd)
+    assert plan.t0 == t_next + dt + 0.010 and mpc.prepare_misses == misses + 1
+    assert mpc.solver.stats.status == "rti"

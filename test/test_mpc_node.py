@@ -524,3 +524,55 @@ def test_a_tick_off_the_node_grid_moves_the_warm_start_by_the_fraction(walking_m
     np.testing.assert_allclose(a.initial_guess[:, :N - 1], A[:, :N - 1] + 0.5, atol=1e-12)
     mpc._shift_fraction(-0.5)  # back: interior nodes where they were
     np.testing.assert_allclose(q.initial_guess[7:, 1:N], Q[7:, 1:N], atol=1e-12)
+
+
+def _feed_state(node: MpcNode, ns: int, q: np.ndarray) -> None:
+    """One standing state stamped ``ns`` on a sim clock at ``ns``, into the callbacks."""
+    node.get_clock().set_ros_time_override(RosTime(nanoseconds=ns))
+    stamp, zeros = time_from_ns(ns), np.zeros(3)
+    node._on_joint_state(joint_state_to_msg(stamp, node.joint_names, q[7:],
+                                            np.zeros(len(q) - 7)))
+    node._on_odom(odometry_to_msg(stamp, q[:3], q[3:7], zeros, zeros))
+
+
+def test_prepare_ahead_ticks_are_feedback_steps_stamped_at_their_plan_time(context,
+                                                                             walking_mpc):
+    """With prepare_ahead, a state on the prepared tick time is answered by the feedback
+    step alone; one stamped 3 ms off is predicted to that time (the plan's stamp says so);
+    10 ms off (past max_extrapolation) gets a whole tick stamped with the state's time."""
+    node = sim_time_node(context, walking_mpc, prepare_ahead=True, max_extrapolation=0.005)
+    try:
+        sent = Sent()
+        node._pub_traj, node._pub_path, node._pub_diag = sent, Sent(), Sent()
+        _, q = standing_configuration(node.mpc.cfg)
+        start, period = 10 * NS_PER_S, 20_000_000
+        misses = node.mpc.prepare_misses
+        offsets = [0, 0, 0, 0, -3_000_000, 0, 10_000_000]
+        for k, off in enumerate(offsets):
+            _feed_state(node, start + k * period + off, q)
+        stamps = [time_to_ns(m.header.stamp) - start for m in sent.msgs]
+        grid = [k * period for k in range(len(offsets))]
+        # on the grid, and 3 ms early: planned at the prepared tick time
+        assert stamps[:6] == grid[:6]
+        # 10 ms late: a whole tick from the state's own stamp
+        assert stamps[6] == grid[6] + 10_000_000
+        assert node.mpc.prepare_misses == misses + 1
+        assert node.mpc.solver.stats.status == "rti"
+        assert node.last_prepare_time > 0.0  # the next tick was prepared after publishing
+    finally:
+        walking_mpc.settings.prepare_ahead = False  # the fixture is shared
+        node.destroy_node()
+
+
+def test_prepare_ahead_diagnostics_report_both_phases(context, walking_mpc):
+    node = sim_time_node(context, walking_mpc, prepare_ahead=True)
+    try:
+        misses = walking_mpc.prepare_misses
+        out = drive_in_sim_time(node, 5)
+        values = {kv.key: kv.value for kv in out["diag"][-1].status[0].values}
+        assert float(values["prepare_time_ms"]) > 0.0
+        assert int(values["prepare_misses"]) == misses
+        assert node.mpc.solver.stats.status == "feedback"
+    finally:
+        walking_mpc.settings.prepare_ahead = False
+        node.destroy_node()

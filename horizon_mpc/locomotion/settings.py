@@ -64,6 +64,16 @@ class MpcSettings:
     # ILQR iterations per tick: with 1 the go2 trot fell at 0.8 m/s forward and on several
     # combined commands (vx 0.3 with vy -0.3 or wz 1.0) that 2 walk (doc/locomotion.md)
     iterations: int = 2
+    # split the last iteration of a tick (real-time iteration, WalkingMpc.prepare): its
+    # quadratisation and backward pass run after the previous plan went out, so a tick's
+    # latency is one rollout and line search from the measured state (~1 ms against ~11).
+    # Off by default: the measured state then gets one Gauss-Newton step, not two, and in
+    # the lockstep sweep of doc/locomotion.md the go2 walked 2 of 13 commands that way
+    # (13 of 13 with whole ticks)
+    prepare_ahead: bool = False
+    # s: a state stamped this far from the prepared tick time is predicted to it with its
+    # velocity; further away, the tick runs whole
+    max_extrapolation: float = 0.005
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> MpcSettings:

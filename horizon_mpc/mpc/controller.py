@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 
 import numpy as np
+import pinocchio as pin
 
 from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.config import RobotConfig, load_robot_config
@@ -126,6 +127,10 @@ class WalkingMpc:
         # ignores it)
         self.time_budget: float | None = None
         self._interp: tuple[BufferedFunction, BufferedFunction] | None = None  # on first use
+        # split real-time iteration (prepare() / the feedback of update()): the tick time
+        # the prepared step is for
+        self._prepared_for: float | None = None
+        self.prepare_misses = 0  # ticks too far from the prepared time: whole ticks run
 
     # ------------------------------------------------------------------ set-up
     def start(self, q: np.ndarray, v: np.ndarray, t: float = 0.0,
@@ -152,6 +157,7 @@ class WalkingMpc:
         self.solver.set_option("rti", True)
         self._standing = {n: wp.prb.get_variable(n).initial_guess for n in ("q", "v", "a", "f")}
         self.t_last = t
+        self._prepared_for = None
         return self._plan(t)
 
     def prepare_inverse_dynamics(self, n: int) -> None:
@@ -177,37 +183,120 @@ class WalkingMpc:
         """One MPC tick at time ``t`` (s) from the measured ``q`` (nq), ``v`` (nv).
 
         ``cmd``: desired base velocity ``(vx, vy, wz)`` in the base frame (None: zero).
+        After :meth:`prepare` for a time within ``settings.max_extrapolation`` of ``t``,
+        the tick is only the feedback step of the prepared iteration (``cmd`` was taken at
+        the preparation); otherwise it is the whole tick.
         """
         if self.t_last is None:
             return self.start(q, v, t)
+        if self._prepared_for is not None:
+            plan = self._feedback(t, q, v)
+            if plan is not None:
+                return plan
         q = self._clean_q(q)
         dt_tick = max(t - self.t_last, 0.0)
         self._ramp_command(np.zeros(3) if cmd is None else np.asarray(cmd, float), dt_tick)
+        self._shift(dt_tick, q)
         self._advance_pose_ref(q, dt_tick)
-        n_shift = int(round(dt_tick / self.wp.settings.dt))
-        if n_shift > self.wp.n_nodes:
-            self._restore_standing(q)
-        else:
-            for _ in range(n_shift):
-                self.solver.shift()
-            # a tick off the node grid (real time: a timer on one clock, states on another)
-            # moves the warm start by the rest too, so its nodes sit at t + k dt
-            self._shift_fraction(dt_tick / self.wp.settings.dt - n_shift)
         self.t_last = t
-        self.scheduler.command(t, bool(np.any(np.abs(self.cmd) > 1e-3)) or bool(
-            cmd is not None and np.any(np.abs(cmd) > 1e-3)))
+        self._command_gait(t, cmd)
         self._set_state(q, v)
         self._set_references(t)
-        ok = self._solve()
+        ok = self._solve(self.iterations)
         if not ok:
             self._restore_standing(q)
             self._set_state(q, v)
             self._set_references(t)
         return self._plan(t)
 
-    def _solve(self) -> bool:
+    def prepare(self, t_next: float, cmd: np.ndarray | None = None) -> bool:
+        """Preparation phase of the tick at ``t_next`` (s): call it after using the plan of
+        :meth:`update`, off the latency-critical path (a real-time iteration split in two).
+
+        Moves the problem to ``t_next``
+        (``cmd`` ramp, reference pose, contact schedule, warm start shift) with the warm
+        start's own state there as the predicted node 0, runs ``iterations - 1`` whole
+        real-time iterations and prepares the last one (quadratisation and backward pass).
+        The next :meth:`update` then only rolls the prepared feedback law out from its
+        measured state: a state stamped up to ``settings.max_extrapolation`` away from
+        ``t_next`` is first predicted to ``t_next`` with its velocity, and the plan starts
+        at ``t_next``; a state further away gets a whole tick. Returns whether a step is
+        prepared (False: the next update runs a whole tick).
+        """
+        if self.t_last is None:
+            raise RuntimeError("prepare() needs a started controller (start() or update())")
+        dt_tick = max(t_next - self.t_last, 0.0)
+        self._ramp_command(np.zeros(3) if cmd is None else np.asarray(cmd, float), dt_tick)
+        X0 = self.wp.prb.stacked("state")[:, 0]
+        self._shift(dt_tick, X0[:self.model.nq])
+        X0 = self.wp.prb.stacked("state")[:, 0].copy()  # the plan's state at t_next
+        q_pred, v_pred = X0[:self.model.nq], X0[self.model.nq:]
+        self._advance_pose_ref(q_pred, dt_tick)
+        self.t_last = t_next
+        self._command_gait(t_next, cmd)
+        self._set_state(q_pred, v_pred)
+        self._set_references(t_next)
+        n_whole = self.iterations - 1
+        # one multiplier update per tick, after its last iteration (the feedback step)
+        if n_whole and not self._solve(n_whole, update_multipliers=False):
+            self._restore_standing(q_pred)
+            self._set_state(q_pred, v_pred)
+            self._set_references(t_next)
+        ok = self.solver.prepare()
+        self._prepared_for = t_next if ok else None
+        return ok
+
+    def _feedback(self, t: float, q: np.ndarray, v: np.ndarray) -> Plan | None:
+        """The feedback phase of the prepared iteration from the state measured at ``t``;
+        None when ``t`` is too far from the prepared time (the caller runs a whole tick)."""
+        t_plan, self._prepared_for = self._prepared_for, None
+        lead = t_plan - t
+        if abs(lead) > self.settings.max_extrapolation or not self.solver.prepared:
+            self.prepare_misses += 1
+            return None
+        q = self._clean_q(q)
+        v = np.asarray(v, dtype=float)
+        if abs(lead) > 1e-9:
+            # the state predicted to the prepared time (constant velocity)
+            q = pin.integrate(self.model.pin_model, q, v * lead)
+        else:
+            t_plan = t
+        self.t_last = t_plan
+        self.solver.feedback(np.concatenate((q, v)))
+        if not self._healthy():
+            self._restore_standing(q)
+            self._set_state(q, v)
+        plan = self._plan(t_plan)
+        plan.stats["iterations"] = self.iterations
+        return plan
+
+    def _shift(self, dt_tick: float, q: np.ndarray) -> None:
+        """Move the warm start by ``dt_tick`` (s): whole nodes, then the fraction; past the
+        horizon, back to standing at ``q``."""
+        n_shift = int(round(dt_tick / self.wp.settings.dt))
+        if n_shift > self.wp.n_nodes:
+            self._restore_standing(q)
+            return
+        for _ in range(n_shift):
+            self.solver.shift()
+        # a tick off the node grid (real time: a timer on one clock, states on another)
+        # moves the warm start by the rest too, so its nodes sit at t + k dt
+        self._shift_fraction(dt_tick / self.wp.settings.dt - n_shift)
+
+    def _command_gait(self, t: float, cmd: np.ndarray | None) -> None:
+        self.scheduler.command(t, bool(np.any(np.abs(self.cmd) > 1e-3)) or bool(
+            cmd is not None and np.any(np.abs(cmd) > 1e-3)))
+
+    def _solve(self, iterations: int, update_multipliers: bool = True) -> bool:
         self.solver.set_option("time_budget", self.time_budget)
+        self.solver.set_option("iterations_per_call", iterations)
+        self.solver.set_option("rti_multiplier_update", update_multipliers)
         self.solver.solve()
+        return self._healthy()
+
+    def _healthy(self) -> bool:
+        """Whether the solver's last result is usable (finite, not diverged); counts and
+        logs (once per burst) the failures."""
         sol = self.solver.solution
         finite = bool(sol) and all(np.all(np.isfinite(sol[k])) for k in ("q", "v", "a", "f"))
         diverged = self.solver.stats.constraint_violation > self.divergence_threshold

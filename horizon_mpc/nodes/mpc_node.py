@@ -74,6 +74,8 @@ class MpcNode(MpcParameters, Node):
         g.name, g.step_duration = self._p("gait"), self._p("step_duration")
         g.step_height, g.duty_factor = self._p("step_height"), self._p("duty_factor")
         settings.max_velocity = [self._p(n) for n in LIVE_LIMITS]
+        settings.prepare_ahead = bool(self._p("prepare_ahead"))
+        settings.max_extrapolation = float(self._p("max_extrapolation"))
         settings.weights = self._weights_from_parameters(settings.weights)
 
         t = time.perf_counter()
@@ -123,7 +125,10 @@ class MpcNode(MpcParameters, Node):
         self.stale_skips = 0
         self.solver_errors = 0
         self.rejected = {"joint_states": 0, "odom": 0, "cmd_vel": 0}
-        self.last_solve_time = math.nan
+        self.last_solve_time = math.nan  # s: state in -> plan out (the tick's latency)
+        self.last_prepare_time = math.nan  # s: the next tick's preparation after it
+        self._period_ns = round(self.period * NS_PER_S)
+        self._prepared_ns = 0  # the tick time (node clock, ns) the preparation is for
         self.last_state_age = math.nan
         self._last_warn: dict[str, float] = {}
         self._suppressed: dict[str, int] = {}
@@ -261,38 +266,55 @@ class MpcNode(MpcParameters, Node):
         v = np.concatenate((lin, ang, vj))
         cmd = self.command
         self._last_tick_stamp = stamp_ns
+        bootstrap = self.plan is None
         wall = time.perf_counter()
         try:
-            if self.plan is None:
+            if bootstrap:
                 plan = self.mpc.start(q, v, t)
                 self.get_logger().info(f"bootstrapped at t = {t:.3f} s in "
                                        f"{time.perf_counter() - wall:.2f} s; ticking")
             else:
+                misses = self.mpc.prepare_misses
                 plan = self.mpc.update(t, q, v, cmd)
+                if self.mpc.prepare_misses > misses:
+                    self._warn("prepare_miss", f"state stamped {t:.4f} s, "
+                               f"{abs(self._prepared_ns - stamp_ns) / 1e6:.1f} ms from the "
+                               "prepared tick time: ran a whole tick (is control_rate the "
+                               "rate of the states/ticks?)")
         except Exception as exc:  # noqa: BLE001 - the node must outlive any solver error
             self.solver_errors += 1
             self._warn("solver", f"MPC tick failed ({type(exc).__name__}: {exc}); "
                        "keeping the last trajectory")
             return False
         self.last_solve_time = time.perf_counter() - wall
-        if self.plan is not None and self.last_solve_time > self.period:
-            self.deadline_misses += 1
-            self._warn("deadline", f"tick took {self.last_solve_time * 1e3:.1f} ms > period "
-                       f"{self.period * 1e3:.1f} ms ({self.deadline_misses} misses)")
+        # the plan starts at the state's stamp, or at the prepared tick time when the state
+        # was predicted to it (WalkingMpc.update)
+        plan_ns = stamp_ns if plan.t0 == t else self._prepared_ns
         self.plan = plan
         self.ticks += 1
-        self._publish_plan(plan, stamp_ns, now_ns)
+        self._pub_traj.publish(self.trajectory_msg(plan, plan_ns))
+        if due(self._last_path_ns, self._path_period_ns, now_ns):
+            self._last_path_ns = now_ns
+            self._pub_path.publish(self.path_msg(plan, plan_ns))
+        self.last_prepare_time = 0.0
+        if self.mpc.settings.prepare_ahead:
+            try:
+                self._prepared_ns = plan_ns + self._period_ns
+                self.mpc.prepare(self._prepared_ns / NS_PER_S, cmd)
+            except Exception as exc:  # noqa: BLE001 - as above; the next tick runs whole
+                self.solver_errors += 1
+                self._warn("solver", f"MPC preparation failed ({type(exc).__name__}: {exc})")
+            self.last_prepare_time = time.perf_counter() - wall - self.last_solve_time
+        # a tick's work (its latency and the next tick's preparation) must fit its period
+        work = self.last_solve_time + self.last_prepare_time
+        if work > self.period and not bootstrap:
+            self.deadline_misses += 1
+            self._warn("deadline", f"tick took {work * 1e3:.1f} ms > period "
+                       f"{self.period * 1e3:.1f} ms ({self.deadline_misses} misses)")
+        self._publish_diagnostics(plan, plan_ns, now_ns)
         return True
 
     # ------------------------------------------------------------------ outputs
-    def _publish_plan(self, plan: Plan, stamp_ns: int, now_ns: int) -> None:
-        """The trajectory every tick; the path and diagnostics when their period is due."""
-        self._pub_traj.publish(self.trajectory_msg(plan, stamp_ns))
-        if due(self._last_path_ns, self._path_period_ns, now_ns):
-            self._last_path_ns = now_ns
-            self._pub_path.publish(self.path_msg(plan, stamp_ns))
-        self._publish_diagnostics(plan, stamp_ns, now_ns)
-
     def trajectory_msg(self, plan: Plan, stamp_ns: int) -> JointTrajectory:
         """The first ``publish_points`` nodes of ``plan`` (joints in model order); efforts
         from the inverse dynamics of those nodes only (:func:`trajectory_from_plan`)."""
@@ -331,6 +353,8 @@ class MpcNode(MpcParameters, Node):
         values = {
             "solve_time_ms": self.last_solve_time * 1e3,
             "solve_time_max_ms": self._solve_time_max * 1e3,
+            "prepare_time_ms": self.last_prepare_time * 1e3,
+            "prepare_misses": self.mpc.prepare_misses,
             "iterations": stats.get("iterations", math.nan),
             "cost": stats.get("cost", math.nan),
             "constraint_violation": stats.get("constraint_violation", math.nan),

@@ -58,6 +58,12 @@ class MpcParameters:
         d("solve_budget", 0.85, "with trigger 'timer': the ILQR iterations after the first "
           "are skipped when they would end later than this fraction of the control period "
           "after the solve started (0: always run them all)", _range(0, 10), ro=True)
+        d("prepare_ahead", bool(st.prepare_ahead), "after publishing a plan, prepare the next "
+          "tick's last iteration (quadratisation, backward pass): a tick is then only its "
+          "feedback step from the new state (low latency); false: whole ticks", ro=True)
+        d("max_extrapolation", float(st.max_extrapolation), "a state stamped up to this far "
+          "(s) from the prepared tick time is predicted to it with its velocity; further: "
+          "a whole tick", _range(0, 1), ro=True)
         d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
           "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)
         d("gait", st.gait.name, f"gait ({', '.join(GAITS)}); live")

@@ -229,7 +229,9 @@ class TickRecord:
     Plans: ``plan_t`` the stamp of each ``joint_trajectory`` (the state time it planned
     from, s), ``plan_age`` the simulator's time at reception minus that stamp (s). Ticks,
     from ``/diagnostics``: ``tick_t`` stamp, ``tick_time`` solve time (s, the node's
-    ``solve_time_ms``: ``WalkingMpc.start``/``update``), ``iterations``, ``command`` (the
+    ``solve_time_ms``: ``WalkingMpc.start``/``update``), ``prepare_time`` (s, the node's
+    ``prepare_time_ms``: the next tick's preparation after it, 0 without ``prepare_ahead``),
+    ``iterations``, ``command`` (the
     node's ramped command at that tick). Counters: the node's latest values.
     """
 
@@ -237,6 +239,7 @@ class TickRecord:
     plan_age: list[float] = field(default_factory=list)
     tick_t: list[float] = field(default_factory=list)
     tick_time: list[float] = field(default_factory=list)
+    prepare_time: list[float] = field(default_factory=list)
     iterations: list[float] = field(default_factory=list)
     command: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     counters: dict[str, float] = field(default_factory=lambda: {
@@ -278,6 +281,7 @@ class MpcMonitor(Node):
         if ticks > rec.counters["ticks"]:  # a published plan (stale skips publish too)
             rec.tick_t.append(stamp)
             rec.tick_time.append(_number(values.get("solve_time_ms")) / 1e3)
+            rec.prepare_time.append(_number(values.get("prepare_time_ms")) / 1e3)
             rec.iterations.append(_number(values.get("iterations")))
             try:
                 rec.command = [float(c) for c in json.loads(values.get("command", ""))]

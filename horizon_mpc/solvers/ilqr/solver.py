@@ -69,6 +69,8 @@ class IlqrSolver(Solver):
     ``al_inner_tol``/``al_max_inner``: a converging solve updates the multipliers and
     penalties when the expected decrease is below ``al_inner_tol`` times the cost (the inner
     problem is nearly solved), after a rejected step, or every ``al_max_inner`` iterations;
+    ``rti_multiplier_update``: False leaves a real-time call's multipliers alone (the
+    split iteration of :meth:`prepare`/:meth:`feedback` updates them after its feedback);
     ``line_search``: False takes every full step (the classic real-time iteration of an
     MPC, where the next tick corrects the linearisation error); a step whose evaluation is
     not finite is still rejected.
@@ -95,6 +97,7 @@ class IlqrSolver(Solver):
         "line_search": True,
         "al_inner_tol": 1e-3,
         "al_max_inner": 10,
+        "rti_multiplier_update": True,
     }
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
@@ -131,6 +134,7 @@ class IlqrSolver(Solver):
             self._backward, self._rollout = riccati.backward_pass, riccati.linear_rollout
         self.feedback_gains = np.zeros((N, m.nu, m.ndx))
         self.timings: dict[str, float] = {}
+        self._prepared: tuple | None = None  # (evaluation, LQ step, info) of prepare()
 
     # ------------------------------------------------------------------ problem data
     def _gather(self) -> None:
@@ -272,41 +276,61 @@ class IlqrSolver(Solver):
         return self._integrate(X.T, alpha * dX.T)[0].T.copy()
 
     # ------------------------------------------------------------------ iterations
-    def _iterate(self, ev: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:
-        """One ILQR iteration from (self.X, self.U) with its evaluation ``ev``."""
+    def _lq_step(self, ev: dict[str, Any], info: dict[str, float]):
+        """Quadratise at (self.X, self.U), project the equality rows and run the backward
+        pass, raising the regularisation until every Q_uu is positive definite.
+
+        Returns ``(q, proj, bw)``, or None (``info`` says why: ``status_nan``,
+        ``linearisation_failed``, ``backward_failed``)."""
         m, o = self.model, self.opts
         t0 = time.perf_counter()
         q = self._quadratise(self.X, self.U, ev)
         t1 = time.perf_counter()
-        info = {"mu": self.mu, "alpha": 0.0, "accepted": 0.0}
+        self._time("quadratise", t1 - t0)
         if q is None:
             if self.mu >= o["mu_max"]:
                 info["linearisation_failed"] = 1.0
             self.mu = min(max(self.mu * 100, 1e-6), o["mu_max"])
             info["status_nan"] = 1.0
-            return ev, info
+            return None
         proj = None
         if self._layout.any:
             nc, ncN = m.nc_con, m.ncN_con
             proj = project(self._layout, ev["c"][:, :nc], q["cx"], q["cu"], ev["cN"][0, :ncN],
                            q["cxN"], q["A"], q["B"], ev["gap"])
             info["rank_deficient_nodes"] = float(proj.rank_deficient)
-        # backward pass; raise the regularisation until every Q_uu is positive definite
         while True:
             bw = self._backward(q["A"], q["B"], q["lx"], q["lu"], q["lxx"], q["luu"], q["lux"],
                                ev["gap"], q["lxN"], q["lxxN"], self.mu, proj)
             if bw is not None:
-                break
+                self._time("backward", time.perf_counter() - t1)
+                return q, proj, bw
             if self.mu >= o["mu_max"]:
                 info["backward_failed"] = 1.0
-                return ev, info
+                return None
             self.mu = min(max(self.mu * 10, 1e-6), o["mu_max"])
-        t2 = time.perf_counter()
+
+    def _iterate(self, ev: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:
+        """One ILQR iteration from (self.X, self.U) with its evaluation ``ev``."""
+        m = self.model
+        info = {"mu": self.mu, "alpha": 0.0, "accepted": 0.0}
+        lq = self._lq_step(ev, info)
+        if lq is None:
+            return ev, info
+        q, proj, bw = lq
         if self.x_init is not None:
             dx0 = ev["d0"]
         else:
             S0 = bw.S[0] + 1e-9 * np.eye(m.ndx)
             dx0 = -np.linalg.solve(S0, bw.s[0])
+        return self._step(ev, q, proj, bw, dx0, info)
+
+    def _step(self, ev: dict[str, Any], q: dict[str, np.ndarray], proj, bw, dx0: np.ndarray,
+              info: dict[str, float]) -> tuple[dict[str, Any], dict[str, float]]:
+        """The rest of an iteration after its backward pass: linear rollout from ``dx0``,
+        merit weight, line search, regularisation update."""
+        o = self.opts
+        t2 = time.perf_counter()
         dX, dU = self._rollout(q["A"], q["B"], ev["gap"], bw, dx0)
         self.feedback_gains = bw.K
         # directional derivative of the model cost along the step; the gaps shrink linearly
@@ -350,16 +374,24 @@ class IlqrSolver(Solver):
             self.mu = max(self.mu / 10, o["mu_min"])
             info.update(alpha=alpha, accepted=1.0, expected=deriv)
         info["step_norm"] = float(alpha * (np.max(np.abs(dX)) + np.max(np.abs(dU), initial=0)))
-        for key, dt in (("quadratise", t1 - t0), ("backward", t2 - t1), ("rollout", t3 - t2),
-                        ("line_search", t4 - t3)):
-            self.timings[key] = self.timings.get(key, 0.0) + dt
+        self._time("rollout", t3 - t2)
+        self._time("line_search", t4 - t3)
         return ev, info
+
+    def _update_multipliers(self, ev: dict[str, Any], rho_factor: float) -> None:
+        self._al.update(ev["c"], rho_factor, self.opts["rho_max"])
+        self._alN.update(ev["cN"], rho_factor, self.opts["rho_max"])
+        ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
+
+    def _time(self, phase: str, seconds: float) -> None:
+        self.timings[phase] = self.timings.get(phase, 0.0) + seconds
 
     def _solve(self) -> bool:
         o = self.opts
         t_start = time.perf_counter()
         self.timings = {}
         self._nu = 0.0
+        self._prepared = None
         self._gather()
         ev = self._evaluate(self.X, self.U)
         if ev is None:
@@ -391,10 +423,8 @@ class IlqrSolver(Solver):
                           or not info.get("accepted") or inner >= o["al_max_inner"])
             if (rti and it == n_iter) or (not rti and inner_done):
                 inner = 0
-                factor = 1.0 if rti else o["rho_factor"]
-                self._al.update(ev["c"], factor, o["rho_max"])
-                self._alN.update(ev["cN"], factor, o["rho_max"])
-                ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
+                if not rti or o["rti_multiplier_update"]:
+                    self._update_multipliers(ev, 1.0 if rti else o["rho_factor"])
             rec = {"iter": it, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
                    "violation": ev["viol"], **info}
             history.append(rec)
@@ -439,11 +469,96 @@ class IlqrSolver(Solver):
             return
         self._split_solution(self.X.T.copy(), self.U.T.copy(), self.S)
 
+    # ------------------------------------------------------------------ split iteration
+    def prepare(self) -> bool:
+        """Preparation phase of a real-time iteration split in two (MPC latency).
+
+        Everything of one iteration that does not need the measured initial state: read the
+        problem (as :meth:`solve` does; node 0's fixed state is the predicted one), evaluate
+        and quadratise at the warm start, project the equality rows, backward pass.
+        :meth:`feedback` then ends the iteration from the measured state: rollout of the
+        feedback law, line search, multiplier update. Returns False when no step could be
+        prepared (warm start or linearisation not finite, regularisation limit);
+        ``stats.status`` says why.
+        """
+        t_start = time.perf_counter()
+        self.timings = {}
+        self._nu = 0.0
+        self._prepared = None
+        self._gather()
+        ev = self._evaluate(self.X, self.U)
+        if ev is None:
+            self.stats.status = "prepare: warm start not finite"
+            return False
+        info = {"mu": self.mu, "alpha": 0.0, "accepted": 0.0}
+        lq = self._lq_step(ev, info)
+        self._time("prepare", time.perf_counter() - t_start)
+        if lq is None:
+            self.stats.status = ("prepare: regularisation limit reached"
+                                 if info.get("backward_failed") else
+                                 "prepare: linearisation not finite")
+            return False
+        self._prepared = (ev, *lq, info)
+        return True
+
+    @property
+    def prepared(self) -> bool:
+        """Whether a :meth:`prepare` awaits its :meth:`feedback`."""
+        return self._prepared is not None
+
+    def feedback(self, x0: np.ndarray) -> bool:
+        """Feedback phase: end the prepared iteration from the measured initial state.
+
+        ``x0`` (nx,): the measured state. The rollout of the prepared feedback law from
+        ``x0 (-) x0_predicted``, the line search of an iteration and the multiplier update
+        of a real-time call: the result is exactly the one-iteration real-time
+        :meth:`solve` from the same warm start with node 0 fixed at ``x0``. The solution,
+        statistics and the problem's guesses are updated like :meth:`solve` does (node 0's
+        bounds in the problem stay what the caller set). Returns whether the result is
+        finite with a constraint violation within ``max(tol_constraint, 1e-3)`` (the
+        real-time criterion).
+
+        Raises:
+            RuntimeError: no :meth:`prepare` awaits its feedback.
+        """
+        if self._prepared is None:
+            raise RuntimeError("ilqr feedback() needs a successful prepare() first")
+        t_start = time.perf_counter()
+        ev, q, proj, bw, info = self._prepared
+        self._prepared = None
+        m = self.model
+        x0 = np.asarray(x0, dtype=float).reshape(m.nx)
+        st = self.stats
+        if not np.all(np.isfinite(x0)):
+            st.success, st.status = False, "feedback: initial state not finite"
+            return False
+        dx0 = self._difference(self.X[0], x0)[0].reshape(m.ndx).copy()
+        # the prepared evaluation, with node 0 now fixed at x0
+        self.x_init = x0.copy()
+        ev = dict(ev, d0=dx0, gap_l1=ev["gap_l1"] - float(np.sum(np.abs(ev["d0"])))
+                  + float(np.sum(np.abs(dx0))),
+                  viol=max(ev["viol"], float(np.max(np.abs(dx0)))))
+        ev, info = self._step(ev, q, proj, bw, dx0, info)
+        self._update_multipliers(ev, 1.0)
+        rec = {"iter": 1, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
+               "violation": ev["viol"], **info}
+        st.iterations, st.history, st.status = 1, [rec], "feedback"
+        st.success = ev["viol"] <= max(self.opts["tol_constraint"], 1e-3) and bool(
+            np.isfinite(ev["cost"]))
+        self._publish(ev)
+        if self.opts["warm_start"]:
+            self._write_back()
+        self._time("feedback", time.perf_counter() - t_start)
+        st.time = self.timings["feedback"]
+        st.extra["timings"] = dict(self.timings)
+        return st.success
+
     # ------------------------------------------------------------------ receding horizon
     def shift(self) -> None:
         """Shift the problem's guesses/parameters and the AL multipliers one node back."""
         super().shift()
         self._al.shift()
+        self._prepared = None
 
     def reset_multipliers(self) -> None:
         """Forget the augmented-Lagrangian state (e.g. after a solver failure)."""
