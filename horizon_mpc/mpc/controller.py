@@ -213,10 +213,10 @@ class WalkingMpc:
         """Preparation phase of the tick at ``t_next`` (s): call it after using the plan of
         :meth:`update`, off the latency-critical path (a real-time iteration split in two).
 
-        Moves the problem to ``t_next``
-        (``cmd`` ramp, reference pose, contact schedule, warm start shift) with the warm
-        start's own state there as the predicted node 0, runs ``iterations - 1`` whole
-        real-time iterations and prepares the last one (quadratisation and backward pass).
+        Moves the problem to ``t_next`` (``cmd`` ramp, reference pose, contact schedule,
+        warm start shift) with the warm start's own state there as the predicted node 0,
+        runs ``iterations - 1`` whole real-time iterations and prepares the last one
+        (quadratisation and backward pass).
         The next :meth:`update` then only rolls the prepared feedback law out from its
         measured state: a state stamped up to ``settings.max_extrapolation`` away from
         ``t_next`` is first predicted to ``t_next`` with its velocity, and the plan starts
@@ -256,6 +256,8 @@ class WalkingMpc:
             return None
         q = self._clean_q(q)
         v = np.asarray(v, dtype=float)
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
+            return None  # the whole tick's failure handling applies
         if abs(lead) > 1e-9:
             # the state predicted to the prepared time (constant velocity)
             q = pin.integrate(self.model.pin_model, q, v * lead)
