@@ -282,7 +282,8 @@ def test_realtime_mode_hears_the_ticks_of_the_child_through_ros(realtime_run):
     assert 0 < summary["tick_time_ms"]["median"] < summary["tick_time_ms"]["max"] < 1000
     assert np.isfinite(summary["bootstrap_ms"])
     # every plan is stamped with the state it started from: the sim got it later, never before
-    assert summary["ticks"] - 2 <= len(rec.plan_age) <= summary["ticks"]
+    # the run may end between the last plan and its diagnostics (published just after it)
+    assert summary["ticks"] - 2 <= len(rec.plan_age) <= summary["ticks"] + 1
     assert min(rec.plan_age) >= 0 and summary["plan_age_ms"]["median"] < 500
     assert 0 <= summary["deadline_misses"] <= summary["ticks"]
     # the MPC's ramped command, read from its diagnostics, follows the profile's 0.2 m/s
