@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import process_exists
 
 from horizon_mpc.closed_loop import (
     DEFAULT_PROFILE,
@@ -212,14 +213,6 @@ def test_the_summary_counts_ticks_per_sim_second_and_keeps_the_bootstrap_apart()
 
 
 # ---------------------------------------------------------------------- real-time mode
-def _running(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
-
-
 def _children(pid: int) -> list[int]:
     """Process ids whose parent is ``pid`` (from /proc)."""
     out = []
@@ -264,7 +257,7 @@ def test_realtime_mode_runs_the_mpc_in_a_second_process(realtime_run):
     rec, summary, _ = realtime_run
     child = summary["mpc_process"]
     assert child["pid"] != os.getpid() and child["exit_code"] == 0
-    assert not _running(child["pid"])  # stopped and reaped at the end of the run
+    assert not process_exists(child["pid"])  # stopped and reaped at the end of the run
     assert child["memory_mb"]["peak"] > 50  # it built a walking MPC of its own
     assert child["cpu_s"] > 0.1 * summary["sim_time"]
     assert "bootstrapped" in rec.mpc_log  # its output is kept
@@ -323,7 +316,7 @@ def test_the_mpc_process_is_stopped_when_the_run_raises(started_processes, monke
         run("go2", REALTIME_SHORT, mode="realtime", gif=False)
     (child,) = started_processes
     assert child.returncode == 0  # SIGINT: a clean exit
-    assert not _running(child.pid)
+    assert not process_exists(child.pid)
 
 
 def _start_cli_and_wait_for_its_child(tmp_path: Path) -> tuple[subprocess.Popen, int]:
@@ -355,12 +348,12 @@ def test_no_mpc_process_outlives_a_stopped_or_killed_closed_loop(tmp_path, sig):
         parent.send_signal(sig)
         parent.wait(timeout=60)
         deadline = time.monotonic() + 30
-        while _running(child) and time.monotonic() < deadline:
+        while process_exists(child) and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert not _running(child) or _zombie(child), f"mpc_node {child} outlived its parent"
+        assert not process_exists(child) or _zombie(child), f"mpc_node {child} outlived its parent"
     finally:
         for pid in (parent.pid, child):
-            if _running(pid):
+            if process_exists(pid):
                 os.kill(pid, signal.SIGKILL)
         parent.wait(timeout=10)
 

@@ -12,6 +12,7 @@ import pytest
 import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from processes import process_exists
 from trajectory_msgs.msg import JointTrajectory
 
 from horizon_mpc.nodes.mpc_process import (
@@ -27,14 +28,6 @@ from horizon_mpc.nodes.mpc_process import (
 # a stand-in for mpc_node that ignores SIGINT (as a node stuck in a long build would)
 STUBBORN = ("import signal, sys, time; signal.signal(signal.SIGINT, signal.SIG_IGN); "
             "print('stubborn up', flush=True); time.sleep(60)")
-
-
-def _gone(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    return False
 
 
 def test_the_command_line_sets_the_node_parameters():
@@ -78,7 +71,7 @@ def test_a_child_ignoring_sigint_is_terminated_after_the_timeout():
         code = proc.stop(timeout=0.5)
         assert code == -15  # SIGINT ignored, SIGTERM ended it
         assert 0.4 < time.monotonic() - t0 < 5
-        assert _gone(proc.pid)
+        assert not process_exists(proc.pid)
         assert proc.stop() == -15  # idempotent
     finally:
         proc.close()
@@ -98,7 +91,7 @@ def test_waiting_gives_up_after_the_timeout_with_the_child_output():
     with MpcProcess("go2", command=[sys.executable, "-c", sleeper]) as proc:
         with pytest.raises(MpcProcessError, match="no first plan within 0.3 s"):
             wait_until(lambda: False, lambda: time.sleep(0.05), proc, 0.3, "first plan")
-    assert _gone(proc.pid)
+    assert not process_exists(proc.pid)
 
 
 def test_memory_and_cpu_of_a_process_are_read_from_proc():

@@ -383,17 +383,23 @@ class IlqrSolver(Solver):
         self._alN.update(ev["cN"], rho_factor, self.opts["rho_max"])
         ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
 
+    def _begin_call(self) -> dict[str, Any] | None:
+        """What :meth:`solve` and :meth:`prepare` start with: fresh timings and merit
+        weight, no pending preparation, the problem read, the warm start evaluated (None
+        if not finite)."""
+        self.timings = {}
+        self._nu = 0.0
+        self._prepared = None
+        self._gather()
+        return self._evaluate(self.X, self.U)
+
     def _time(self, phase: str, seconds: float) -> None:
         self.timings[phase] = self.timings.get(phase, 0.0) + seconds
 
     def _solve(self) -> bool:
         o = self.opts
         t_start = time.perf_counter()
-        self.timings = {}
-        self._nu = 0.0
-        self._prepared = None
-        self._gather()
-        ev = self._evaluate(self.X, self.U)
+        ev = self._begin_call()
         if ev is None:
             self.stats.success, self.stats.status = False, "initial guess not finite"
             self._publish(ev)
@@ -482,11 +488,7 @@ class IlqrSolver(Solver):
         ``stats.status`` says why.
         """
         t_start = time.perf_counter()
-        self.timings = {}
-        self._nu = 0.0
-        self._prepared = None
-        self._gather()
-        ev = self._evaluate(self.X, self.U)
+        ev = self._begin_call()
         if ev is None:
             self.stats.status = "prepare: warm start not finite"
             return False
