@@ -61,6 +61,14 @@ class MpcSettings:
     max_acceleration: list[float] = field(default_factory=lambda: [1.0, 1.0, 2.0])
     stand_when_idle: bool = True
     rho_init: float = 100.0
+    # inequality rows (friction cones, torque and joint limits) in the ILQR: 'barrier' (a
+    # relaxed log barrier, smooth: one iteration per tick walks every command of the lockstep
+    # sweep of doc/locomotion.md) or 'lagrangian' (the augmented Lagrangian: exact at
+    # convergence, but its active set switches between ticks; with one iteration per tick
+    # the go2 fell on 9 of 13 sweep commands; two iterations walked all 13)
+    inequality: str = "barrier"
+    barrier_mu: float = 1.0  # weight of the barrier terms
+    barrier_delta: float = 1.0  # slack (units of each row: N, N m, rad) where it turns quadratic
     # ILQR iterations per tick: with 1 the go2 trot fell at 0.8 m/s forward and on several
     # combined commands (vx 0.3 with vy -0.3 or wz 1.0) that 2 walk (doc/locomotion.md)
     iterations: int = 2

@@ -104,7 +104,8 @@ class WalkingMpc:
         self.wp = build_walking_problem(model, self.cfg, self.settings)
         self.solver = make_solver("ilqr", self.wp.prb, {
             "rti": True, "iterations_per_call": self.iterations,
-            "rho_init": self.settings.rho_init})
+            "rho_init": self.settings.rho_init, "inequality": self.settings.inequality,
+            "barrier_mu": self.settings.barrier_mu, "barrier_delta": self.settings.barrier_delta})
         # per tick: numpy in/out through preallocated buffers (no DM conversion); one mapped
         # function per number of nodes asked for (the horizon, the node's published points)
         self._id_maps: dict[int, BufferedFunction] = {}

@@ -1,28 +1,77 @@
-"""Augmented-Lagrangian bookkeeping of the ILQR's constraint rows.
+"""Augmented-Lagrangian and relaxed-barrier bookkeeping of the ILQR's constraint rows.
 
 Each row ``c`` (a constraint or a variable bound at one node) has bounds ``lb <= c <= ub``
 (``-inf``/``inf`` where absent or inactive). Equalities (``lb == ub``) carry one free
-multiplier; inequalities carry ``lam_lo, lam_up >= 0``. With per-row penalty ``rho``:
+multiplier and penalty ``rho``: ``lam (c - b) + rho/2 (c - b)^2``. Inequalities are
+treated one of two ways (``inequality``):
 
-* equality:  ``lam (c - b) + rho/2 (c - b)^2``
-* upper:     ``(max(0, lam_up + rho (c - ub))^2 - lam_up^2) / (2 rho)`` (lower alike)
+* ``'lagrangian'``: multipliers ``lam_lo, lam_up >= 0`` and the term
+  ``(max(0, lam_up + rho (c - ub))^2 - lam_up^2) / (2 rho)`` (lower alike): exact at
+  convergence, but the Gauss-Newton weight of a row jumps between 0 and ``rho/2`` as it
+  enters or leaves the active set, so one iteration per tick can chatter;
+* ``'barrier'``: the relaxed logarithmic barrier of the slack ``h`` (``ub - c``,
+  ``c - lb``), ``-mu ln(h / delta)`` for ``h > delta`` and its quadratic extension below
+  (continuous up to the second derivative, finite for any violation): a smooth, convex
+  term whose model is right to second order on both sides of the boundary. Not exact: a
+  row pressed hard by the cost settles slightly inside or, past ``delta``, slightly
+  outside its bound; ``violation`` reports it as it is.
 
-The Gauss-Newton model of each active row is ``rho/2 (c - t)^2`` with a target ``t``
-(``b - lam/rho``, ``ub - lam_up/rho``, ``lb + lam_lo/rho``), i.e. weight ``w = rho/2``.
-Arrays have shape (n_nodes, n_rows).
+The Gauss-Newton model of each row is ``w (c - t)^2`` with a weight ``w`` and a target
+``t`` (``rho/2`` and ``b - lam/rho`` for an equality; half the barrier's curvature and
+the Newton target ``c - B'/B''`` for a barrier row). Arrays have shape (n_nodes, n_rows).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["AugmentedLagrangian"]
+__all__ = ["AugmentedLagrangian", "relaxed_barrier"]
+
+INEQUALITY_MODES = ("lagrangian", "barrier")
+
+
+def relaxed_barrier(h: np.ndarray, mu: float, delta: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Value, first and second derivative of the relaxed log barrier at slacks ``h``.
+
+    ``-mu ln(h / delta)`` for ``h > delta``, else
+    ``mu/2 (((h - 2 delta) / delta)^2 - 1)``; zero at ``h = delta``.
+    """
+    h = np.asarray(h, dtype=float)
+    z = (h - 2.0 * delta) / delta
+    value = 0.5 * mu * (z * z - 1.0)
+    d1 = (mu / delta) * z
+    d2 = np.full_like(h, mu / (delta * delta))
+    inside = h > delta
+    if inside.any():
+        hi = h[inside]
+        value[inside] = -mu * np.log(hi / delta)
+        d1[inside] = -mu / hi
+        d2[inside] = mu / (hi * hi)
+    return value, d1, d2
 
 
 class AugmentedLagrangian:
-    """Multipliers and penalties of a block of constraint rows."""
+    """Multipliers, penalties and barrier terms of a block of constraint rows.
 
-    def __init__(self, lb: np.ndarray, ub: np.ndarray, rho0: float):
+    Args:
+        lb, ub: (n_nodes, n_rows) bounds.
+        rho0: initial penalty of the augmented Lagrangian.
+        inequality: ``'lagrangian'`` or ``'barrier'`` (see the module docstring).
+        barrier_mu, barrier_delta: weight and relaxation slack of the barrier (in the
+            units of the rows).
+    """
+
+    def __init__(self, lb: np.ndarray, ub: np.ndarray, rho0: float,
+                 inequality: str = "lagrangian", barrier_mu: float = 1.0,
+                 barrier_delta: float = 1.0):
+        if inequality not in INEQUALITY_MODES:
+            raise ValueError(f"inequality must be one of {INEQUALITY_MODES}, got {inequality!r}")
+        if not (barrier_mu > 0 and barrier_delta > 0):
+            raise ValueError(f"barrier_mu and barrier_delta must be > 0, got {barrier_mu}, "
+                             f"{barrier_delta}")
+        self.barrier = inequality == "barrier"
+        self.mu, self.delta = float(barrier_mu), float(barrier_delta)
         self.lam = np.zeros_like(lb)
         self.lam_lo = np.zeros_like(lb)
         self.lam_up = np.zeros_like(lb)
@@ -46,6 +95,11 @@ class AugmentedLagrangian:
         self._lo = np.where(self.has_lo, lb, 0.0)
         self._up = np.where(self.has_up, ub, 0.0)
         self._any = (bool(eq.any()), bool(self.has_up.any()), bool(self.has_lo.any()))
+        # barrier rows, flat: upper sides then lower sides (a row may have both)
+        self._iu, self._il = np.flatnonzero(self.has_up), np.flatnonzero(self.has_lo)
+        self._bu, self._bl = self.ub.ravel()[self._iu], self.lb.ravel()[self._il]
+        self._isides = np.concatenate((self._iu, self._il))
+        self._irows = np.unique(self._isides)
 
     def violation(self, c: np.ndarray) -> np.ndarray:
         """Per-row violation ``max(lb - c, c - ub, 0)``, shape of ``c``."""
@@ -54,14 +108,27 @@ class AugmentedLagrangian:
         np.maximum(v, np.where(np.isfinite(self.ub), c - self.ub, 0.0), out=v)
         return v
 
+    def _barrier_terms(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Barrier value, dB/dc and d2B/dc2 of the barrier sides, flat (upper sides, then
+        lower sides: index ``self._iu``, ``self._il`` into ``c.ravel()``)."""
+        cf = c.ravel()
+        slack = np.concatenate((self._bu - cf[self._iu], cf[self._il] - self._bl))
+        value, d1, d2 = relaxed_barrier(slack, self.mu, self.delta)
+        d1[:self._iu.size] *= -1.0  # slack ub - c: dB/dc = -B'
+        return value, d1, d2
+
     def value(self, c: np.ndarray) -> float:
-        """The augmented-Lagrangian terms summed over rows."""
+        """The augmented-Lagrangian (and barrier) terms summed over rows."""
         rho = self.rho
         any_eq, any_up, any_lo = self._any
         total = 0.0
         if any_eq:
             e = np.where(self.eq, c - self._b, 0.0)
             total += float(np.sum(self.lam * e + 0.5 * rho * e * e))
+        if self.barrier:
+            if any_up or any_lo:
+                total += float(np.sum(self._barrier_terms(c)[0]))
+            return total
         if any_up:
             t = np.where(self.has_up, self.lam_up + rho * (c - self._up), 0.0)
             np.maximum(t, 0.0, out=t)
@@ -82,6 +149,17 @@ class AugmentedLagrangian:
         eq = self.eq
         w[eq] = 0.5 * rho[eq]
         t[eq] = self.lb[eq] - self.lam[eq] / rho[eq]
+        if self.barrier:
+            if self._any[1] or self._any[2]:
+                _, d1, d2 = self._barrier_terms(c)
+                # a row with both bounds sums its two sides
+                g = np.bincount(self._isides, weights=d1, minlength=c.size)
+                h = np.bincount(self._isides, weights=d2, minlength=c.size)
+                rows = self._irows
+                wf, tf = w.reshape(-1), t.reshape(-1)
+                wf[rows] = 0.5 * h[rows]
+                tf[rows] = c.ravel()[rows] - g[rows] / h[rows]  # h > 0 on every barrier row
+            return w, t
         up = self.has_up & (self.lam_up + rho * (c - np.where(self.has_up, self.ub, 0)) > 0)
         w[up] = 0.5 * rho[up]
         t[up] = self.ub[up] - self.lam_up[up] / rho[up]
@@ -93,15 +171,19 @@ class AugmentedLagrangian:
 
     def update(self, c: np.ndarray, rho_factor: float, rho_max: float,
                decrease: float = 0.25) -> None:
-        """First-order multiplier update; raise ``rho`` on rows that did not improve enough."""
+        """First-order multiplier update; raise ``rho`` on rows that did not improve enough
+        (barrier rows have neither)."""
         rho = self.rho
         eq, up, lo = self.eq, self.has_up, self.has_lo
         self.lam[eq] += rho[eq] * (c[eq] - self.lb[eq])
-        self.lam_up[up] = np.maximum(0.0, self.lam_up[up] + rho[up] * (c[up] - self.ub[up]))
-        self.lam_lo[lo] = np.maximum(0.0, self.lam_lo[lo] + rho[lo] * (self.lb[lo] - c[lo]))
         viol = self.violation(c)
         slow = viol > decrease * self._last_violation
         slow &= viol > 1e-12
+        if self.barrier:
+            slow &= eq
+        else:
+            self.lam_up[up] = np.maximum(0.0, self.lam_up[up] + rho[up] * (c[up] - self.ub[up]))
+            self.lam_lo[lo] = np.maximum(0.0, self.lam_lo[lo] + rho[lo] * (self.lb[lo] - c[lo]))
         self.rho[slow] = np.minimum(rho[slow] * rho_factor, rho_max)
         self._last_violation = viol
 

@@ -11,8 +11,10 @@ One iteration (the real-time iteration of the MPC):
 5. multiplier and penalty update of the augmented Lagrangian (when the inner problem is
    nearly solved, or every few iterations; once per call in real-time mode).
 
-Equality constraints and every bound are honoured through the augmented Lagrangian and
-driven to feasibility over the iterations; nothing the problem declares is dropped.
+Equality constraints are projected exactly or go through the augmented Lagrangian;
+inequality rows and bounds go through the augmented Lagrangian (driven to feasibility over
+the iterations) or, with ``inequality='barrier'``, through a relaxed log barrier (smooth:
+the choice for one iteration per MPC tick). Nothing the problem declares is dropped.
 """
 
 from __future__ import annotations
@@ -71,6 +73,11 @@ class IlqrSolver(Solver):
     problem is nearly solved), after a rejected step, or every ``al_max_inner`` iterations;
     ``rti_multiplier_update``: False leaves a real-time call's multipliers alone (the
     split iteration of :meth:`prepare`/:meth:`feedback` updates them after its feedback);
+    ``inequality``: ``'lagrangian'`` (inequality rows and bounds through the augmented
+    Lagrangian: exact at convergence) or ``'barrier'`` (a relaxed log barrier of weight
+    ``barrier_mu`` and relaxation slack ``barrier_delta``, in the rows' units: smooth, so
+    one iteration per MPC tick does not chatter on the active set, but only approximately
+    feasible; see :mod:`.lagrangian`);
     ``line_search``: False takes every full step (the classic real-time iteration of an
     MPC, where the next tick corrects the linearisation error); a step whose evaluation is
     not finite is still rejected.
@@ -98,6 +105,9 @@ class IlqrSolver(Solver):
         "al_inner_tol": 1e-3,
         "al_max_inner": 10,
         "rti_multiplier_update": True,
+        "inequality": "lagrangian",
+        "barrier_mu": 1.0,
+        "barrier_delta": 1.0,
     }
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
@@ -109,10 +119,13 @@ class IlqrSolver(Solver):
                                        projected_equalities=self.opts["equality"] == "projection")
         m = self.model
         N = m.n_nodes
+        o = self.opts
+        rows = dict(inequality=o["inequality"], barrier_mu=o["barrier_mu"],
+                    barrier_delta=o["barrier_delta"])
         self._al = AugmentedLagrangian(np.full((N, m.nc), -np.inf), np.full((N, m.nc), np.inf),
-                                       self.opts["rho_init"])
+                                       o["rho_init"], **rows)
         self._alN = AugmentedLagrangian(np.full((1, m.ncN), -np.inf),
-                                        np.full((1, m.ncN), np.inf), self.opts["rho_init"])
+                                        np.full((1, m.ncN), np.inf), o["rho_init"], **rows)
         self._layout = EqualityLayout.empty(N, m.nc_con, m.ncN_con)
         self._eq_rows = self._layout.stage_rows()
         self._uses_input = np.concatenate(

@@ -1,0 +1,113 @@
+"""ILQR inequality rows through the relaxed log barrier (``inequality='barrier'``)."""
+
+import casadi as cs
+import numpy as np
+import pytest
+
+from horizon_mpc import Problem, make_solver
+from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian, relaxed_barrier
+
+
+@pytest.mark.parametrize("mu, delta", [(1.0, 1.0), (0.1, 5.0), (1e-3, 1e-2)])
+def test_relaxed_barrier_is_twice_continuous_with_exact_derivatives(mu, delta):
+    h = np.linspace(-3 * delta, 6 * delta, 2001)
+    b, d1, d2 = relaxed_barrier(h, mu, delta)
+    assert np.all(np.isfinite(b)) and np.all(d2 > 0)
+    eps = 1e-6 * delta
+    bp, d1p, _ = relaxed_barrier(h + eps, mu, delta)
+    bm, d1m, _ = relaxed_barrier(h - eps, mu, delta)
+    np.testing.assert_allclose((bp - bm) / (2 * eps), d1, rtol=1e-5, atol=1e-6 * mu / delta)
+    np.testing.assert_allclose((d1p - d1m) / (2 * eps), d2, rtol=1e-4,
+                               atol=1e-6 * mu / delta ** 2)
+    # the two pieces meet with equal value, slope and curvature at h = delta
+    inside = relaxed_barrier(np.array([delta * (1 + 1e-12)]), mu, delta)
+    outside = relaxed_barrier(np.array([delta]), mu, delta)
+    for a, c in zip(inside, outside, strict=True):
+        np.testing.assert_allclose(a, c, rtol=1e-9, atol=1e-9 * mu / delta ** 2)
+    assert outside[0][0] == 0.0
+    # a log barrier inside, growing without bound towards (and past) the bound
+    np.testing.assert_allclose(relaxed_barrier(np.array([3 * delta]), mu, delta)[0],
+                               -mu * np.log(3.0))
+    assert b[0] > b[len(h) // 2] > b[-1]
+
+
+def test_barrier_rows_get_the_newton_model_of_their_barrier():
+    rng = np.random.default_rng(3)
+    lb = np.array([[-1.0, -np.inf, 0.5, 2.0, -np.inf]] * 4)
+    ub = np.array([[np.inf, 1.0, 3.0, 2.0, np.inf]] * 4)
+    al = AugmentedLagrangian(lb, ub, 100.0, inequality="barrier", barrier_mu=0.5,
+                             barrier_delta=0.3)
+    c = rng.uniform(-2.0, 4.0, size=lb.shape)
+    w, t = al.weights_targets(c)
+
+    def total(cc):
+        return al.value(cc)
+
+    eps = 1e-4
+    for k in range(c.shape[0]):
+        for j in (0, 1, 2):  # lower, upper, both: gradient and curvature of the model
+            e = np.zeros_like(c)
+            e[k, j] = eps
+            g = (total(c + e) - total(c - e)) / (2 * eps)
+            hess = (total(c + e) - 2 * total(c) + total(c - e)) / eps ** 2
+            np.testing.assert_allclose(2 * w[k, j] * (c[k, j] - t[k, j]), g, rtol=1e-5,
+                                       atol=1e-7)
+            np.testing.assert_allclose(2 * w[k, j], hess, rtol=1e-3, atol=1e-5)
+    # the equality row keeps the augmented Lagrangian; a free row has no term at all
+    np.testing.assert_array_equal(w[:, 3], 50.0)
+    np.testing.assert_array_equal(w[:, 4], 0.0)
+    # barrier rows carry no multipliers and no penalty growth
+    al.update(c, 10.0, 1e9)
+    assert not al.lam_lo.any() and not al.lam_up.any()
+    assert np.all(al.rho[:, :3] == 100.0)
+
+
+def test_unknown_inequality_mode_and_bad_barrier_parameters_are_refused():
+    lb, ub = np.zeros((2, 1)), np.ones((2, 1))
+    with pytest.raises(ValueError, match="inequality"):
+        AugmentedLagrangian(lb, ub, 1.0, inequality="penalty")
+    with pytest.raises(ValueError, match="barrier_mu"):
+        AugmentedLagrangian(lb, ub, 1.0, inequality="barrier", barrier_delta=0.0)
+
+
+def _pendulum(u_max: float, n: int = 60) -> Problem:
+    """Swing-up with a bounded torque and a final equality (the bound is active)."""
+    prb = Problem(n)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.vertcat(x[1], -9.81 * cs.sin(x[0]) + u))
+    prb.set_dt(0.05)
+    x.set_bounds([0, 0], [0, 0], nodes=0)
+    u.set_bounds(-u_max, u_max)
+    prb.create_cost("effort", u, weight=0.1)
+    prb.create_final_constraint("upright", x - np.array([np.pi, 0.0]))
+    return prb
+
+
+def test_a_small_barrier_approaches_the_augmented_lagrangian_optimum():
+    u_max = 6.0
+    al = make_solver("ilqr", _pendulum(u_max), {"codegen": False, "max_iter": 400})
+    assert al.solve()
+    bar = make_solver("ilqr", _pendulum(u_max), {
+        "codegen": False, "max_iter": 400, "inequality": "barrier", "barrier_mu": 1e-3,
+        "barrier_delta": 1e-2})
+    assert bar.solve(), bar.stats.status
+    # the final equality is still exact; the bound is met within the relaxation slack and
+    # the barrier's interior solution costs a little more than the exact optimum
+    assert bar.stats.constraint_violation <= 1e-6
+    u = bar.solution["u"]
+    assert np.max(np.abs(u)) <= u_max
+    assert np.max(np.abs(u)) > u_max - 0.5  # the bound is pressed: the barrier is at work
+    assert al.stats.cost <= bar.stats.cost <= 1.02 * al.stats.cost
+
+
+def test_a_large_barrier_keeps_the_solution_away_from_the_bound():
+    u_max = 6.0
+    weak = make_solver("ilqr", _pendulum(u_max), {
+        "codegen": False, "max_iter": 400, "inequality": "barrier", "barrier_mu": 1e-3,
+        "barrier_delta": 1e-2})
+    strong = make_solver("ilqr", _pendulum(u_max), {
+        "codegen": False, "max_iter": 400, "inequality": "barrier", "barrier_mu": 1.0,
+        "barrier_delta": 1.0})
+    assert weak.solve() and strong.solve()
+    assert np.max(np.abs(strong.solution["u"])) < np.max(np.abs(weak.solution["u"]))
