@@ -181,6 +181,7 @@ class Probe:
             (mpc_node_module, "joints_from_joint_state", self._wrap_conversion("joint_states")),
             (mpc_node_module, "base_from_odometry", self._wrap_conversion("odom")),
             (WalkingMpc, "update", self._wrap_update),
+            (WalkingMpc, "prepare", self._wrap_section("prepare")),
             (WalkingMpc, "_plan", self._wrap_section("plan")),
             (WalkingMpc, "_set_state", self._wrap_section("set_state")),
             (WalkingMpc, "_set_references", self._wrap_section("set_references")),
@@ -229,22 +230,36 @@ class Probe:
         return __init__
 
     def _instrument_solver(self, solver: object) -> None:
-        """Instance-level wrappers of ``solve`` and ``shift`` (the solver is built by the node)."""
-        solve, shift = solver.solve, solver.shift
+        """Instance-level wrappers of ``solve``, the split iteration (``prepare``,
+        ``feedback``) and ``shift`` (the solver is built by the node)."""
+        shift = solver.shift
         probe = self
 
-        def timed_solve(*args, **kwargs):
-            t0 = time.perf_counter()
-            out = solve(*args, **kwargs)
-            dt = time.perf_counter() - t0
-            if probe._cur is not None:
-                probe._cur["ilqr"] += dt * 1e3
-                timings = getattr(solver, "timings", {}) or {}
-                for key in TIMING_KEYS:
-                    probe._cur[key] += timings.get(key, 0.0) * 1e3
-                probe._cur["solves"] += 1
-                probe._cur["iterations"] += getattr(solver.stats, "iterations", 0) or 0
-            return out
+        def timed(fn, counts_iterations: bool):
+            def wrapper(*args, **kwargs):
+                # solver.timings: a new dict per solve()/prepare(), feedback() adds to it
+                before_obj = getattr(solver, "timings", None)
+                before = dict(before_obj or {})
+                t0 = time.perf_counter()
+                out = fn(*args, **kwargs)
+                dt = time.perf_counter() - t0
+                if probe._cur is not None:
+                    probe._cur["ilqr"] += dt * 1e3
+                    timings = getattr(solver, "timings", {}) or {}
+                    base = before if timings is before_obj else {}
+                    for key in TIMING_KEYS:
+                        probe._cur[key] += (timings.get(key, 0.0) - base.get(key, 0.0)) * 1e3
+                    if counts_iterations:
+                        probe._cur["solves"] += 1
+                        probe._cur["iterations"] += getattr(solver.stats, "iterations", 0) or 0
+                return out
+            return wrapper
+
+        # an iteration split in prepare() + feedback() counts once, with its feedback
+        solver.solve = timed(solver.solve, True)
+        if hasattr(solver, "feedback"):
+            solver.feedback = timed(solver.feedback, True)
+            solver.prepare = timed(solver.prepare, False)
 
         def timed_shift(*args, **kwargs):
             t0 = time.perf_counter()
@@ -254,7 +269,7 @@ class Probe:
                 probe._cur["shifts"] += 1
             return out
 
-        solver.solve, solver.shift = timed_solve, timed_shift
+        solver.shift = timed_shift
 
     def _wrap_tick(self, orig: Callable) -> Callable:
         probe = self
@@ -264,7 +279,8 @@ class Probe:
             sim_now = probe.sim_node.now_ns / 1e9 if probe.sim_node is not None else math.nan
             cur = probe._cur = dict.fromkeys(
                 ("shift", "ilqr", *TIMING_KEYS, "plan", "shifts", "solves", "iterations",
-                 "set_state", "set_references", "trajectory_msg", "path_msg", "diagnostics"),
+                 "set_state", "set_references", "trajectory_msg", "path_msg", "diagnostics",
+                 "prepare"),
                 0.0)
             cur["update_start"] = cur["update_end"] = None
             try:
@@ -277,9 +293,11 @@ class Probe:
             if published and cur["update_start"] is None:  # the bootstrap (WalkingMpc.start)
                 probe.bootstrap_ms = (t1 - t0) * 1e3
             elif published:
-                update = (cur["update_end"] - cur["update_start"]) * 1e3
+                # with prepare_ahead the tick also prepares the next one after publishing:
+                # WalkingMpc.prepare counts with update (its shift, ILQR and references)
+                update = (cur["update_end"] - cur["update_start"]) * 1e3 + cur["prepare"]
                 references = update - cur["shift"] - cur["ilqr"] - cur["plan"]
-                publish = (t1 - cur["update_end"]) * 1e3
+                publish = (t1 - cur["update_end"]) * 1e3 - cur["prepare"]
                 row = {
                     "t": node.plan.t0,
                     "tick": (t1 - t0) * 1e3,

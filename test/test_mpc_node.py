@@ -493,10 +493,11 @@ def test_iterations_per_tick_default_to_the_config_and_are_validated():
     from horizon_mpc.locomotion import MpcSettings
     from horizon_mpc.mpc import WalkingMpc
 
-    assert MpcSettings().iterations == 2
+    assert MpcSettings().iterations == 1
     assert MpcSettings.from_dict({"iterations": 3}).iterations == 3
     mpc = WalkingMpc("go2")
-    assert mpc.iterations == 2 and mpc.solver.opts["iterations_per_call"] == 2
+    assert mpc.iterations == 1 and mpc.solver.opts["iterations_per_call"] == 1
+    assert WalkingMpc("go2", iterations=2).solver.opts["iterations_per_call"] == 2
     with pytest.raises(ValueError, match="iterations per tick must be >= 1"):
         WalkingMpc("go2", iterations=0)
 

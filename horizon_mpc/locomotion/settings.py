@@ -47,7 +47,9 @@ class Weights:
 class MpcSettings:
     """Horizon, gait, weights and limits of the walking MPC."""
 
-    n_nodes: int = 40
+    # 0.6 s: one trot cycle (Crocoddyl's go2 MPC example plans 0.56 s); 40 nodes walk the
+    # same lockstep sweep (doc/locomotion.md) at 1.3x the tick time
+    n_nodes: int = 30
     dt: float = 0.02
     friction: float | None = None  # None: the robot config's friction
     base_height: float | None = None  # None: the nominal standing height
@@ -69,16 +71,14 @@ class MpcSettings:
     inequality: str = "barrier"
     barrier_mu: float = 1.0  # weight of the barrier terms
     barrier_delta: float = 1.0  # slack (units of each row: N, N m, rad) where it turns quadratic
-    # ILQR iterations per tick: with 1 the go2 trot fell at 0.8 m/s forward and on several
-    # combined commands (vx 0.3 with vy -0.3 or wz 1.0) that 2 walk (doc/locomotion.md)
-    iterations: int = 2
+    # ILQR iterations per tick: one walks the 13 commands of the lockstep sweep of
+    # doc/locomotion.md with the barrier (with the augmented Lagrangian it took two)
+    iterations: int = 1
     # split the last iteration of a tick (real-time iteration, WalkingMpc.prepare): its
     # quadratisation and backward pass run after the previous plan went out, so a tick's
-    # latency is one rollout and line search from the measured state (~1 ms against ~11).
-    # Off by default: the measured state then gets one Gauss-Newton step, not two, and in
-    # the lockstep sweep of doc/locomotion.md the go2 walked 2 of 13 commands that way
-    # (13 of 13 with whole ticks)
-    prepare_ahead: bool = False
+    # latency is one rollout and line search from the measured state (~1 ms against ~5).
+    # The lockstep sweep walks 13 of 13 commands this way (go2, solo12, anymal_c)
+    prepare_ahead: bool = True
     # s: a state stamped this far from the prepared tick time is predicted to it with its
     # velocity; further away, the tick runs whole
     max_extrapolation: float = 0.005

@@ -99,13 +99,13 @@ class AugmentedLagrangian:
         self._iu, self._il = np.flatnonzero(self.has_up), np.flatnonzero(self.has_lo)
         self._bu, self._bl = self.ub.ravel()[self._iu], self.lb.ravel()[self._il]
         self._isides = np.concatenate((self._iu, self._il))
-        self._irows = np.unique(self._isides)
+        self._irows = np.flatnonzero(self.has_up | self.has_lo)
 
     def violation(self, c: np.ndarray) -> np.ndarray:
         """Per-row violation ``max(lb - c, c - ub, 0)``, shape of ``c``."""
-        v = np.zeros_like(c)
-        np.maximum(v, np.where(np.isfinite(self.lb), self.lb - c, 0.0), out=v)
-        np.maximum(v, np.where(np.isfinite(self.ub), c - self.ub, 0.0), out=v)
+        # infinite bounds give -inf here (c is finite wherever this is asked)
+        v = np.maximum(self.lb - c, c - self.ub)
+        np.maximum(v, 0.0, out=v)
         return v
 
     def _barrier_terms(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -46,12 +46,6 @@ def _blocks(out: np.ndarray, n: int, rows: int, cols: int) -> np.ndarray:
     return out.T.reshape(n, cols, rows).transpose(0, 2, 1)
 
 
-def _all_finite(arrays) -> bool:
-    """True if no array holds NaN or inf: one sum per array (NaN and inf propagate through
-    it; a finite sum could only overflow past 1e308, far beyond any meaningful value)."""
-    return all(math.isfinite(float(np.sum(a))) for a in arrays)
-
-
 class IlqrSolver(Solver):
     """Constrained multiple-shooting ILQR; see the module docstring.
 
@@ -168,12 +162,14 @@ class IlqrSolver(Solver):
         # stage rows: constraints, then x bounds, then u bounds
         lb, ub = np.full((N, m.nc), -np.inf), np.full((N, m.nc), np.inf)
         i = 0
+        # the terms' own arrays, read only (their public properties return copies)
         for con in m.stage_cons:
-            act = con.active[:N].copy()
-            if self.x_init is not None and not con.uses_input:
+            act = con._active[:N]
+            if self.x_init is not None and not con.uses_input and act[0]:
+                act = act.copy()
                 act[0] = False  # a fixed initial state cannot be changed: nothing to enforce
-            lb[act, i:i + con.dim] = con.lower_bounds[:, :N].T[act]
-            ub[act, i:i + con.dim] = con.upper_bounds[:, :N].T[act]
+            lb[act, i:i + con.dim] = con._lb[:, :N].T[act]
+            ub[act, i:i + con.dim] = con._ub[:, :N].T[act]
             i += con.dim
         lb[:, i:i + m.nx], ub[:, i:i + m.nx] = xlb[:, :N].T, xub[:, :N].T
         i += m.nx
@@ -181,9 +177,9 @@ class IlqrSolver(Solver):
         lbN, ubN = np.full((1, m.ncN), -np.inf), np.full((1, m.ncN), np.inf)
         i = 0
         for con in m.term_cons:
-            if con.active[N]:
-                lbN[0, i:i + con.dim] = con.lower_bounds[:, N]
-                ubN[0, i:i + con.dim] = con.upper_bounds[:, N]
+            if con._active[N]:
+                lbN[0, i:i + con.dim] = con._lb[:, N]
+                ubN[0, i:i + con.dim] = con._ub[:, N]
             i += con.dim
         lbN[0, i:], ubN[0, i:] = xlb[:, N], xub[:, N]
         if self.opts["equality"] == "projection":
@@ -221,9 +217,9 @@ class IlqrSolver(Solver):
         """(n, rows) weight of each residual row on ``nodes`` (0 where its cost is off)."""
         if not costs:
             return np.zeros((n, 0))
-        active = np.array([c.active[nodes] for c in costs], dtype=float)  # (costs, n)
+        active = np.array([c._active[nodes] for c in costs], dtype=float)  # (costs, n)
         dims = [c.dim for c in costs]
-        return active.T.repeat(dims, axis=1) * np.concatenate([c.weight for c in costs])
+        return active.T.repeat(dims, axis=1) * np.concatenate([c._weight for c in costs])
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate(self, X: np.ndarray, U: np.ndarray) -> dict[str, Any] | None:
@@ -231,32 +227,31 @@ class IlqrSolver(Solver):
         m, N = self.model, self.model.n_nodes
         gap, r, c = self._values(X[:N].T, U.T, self.S, self.P[:, :N], X[1:].T)
         rN, cN = self._values_term(X[N], self.S, self.P[:, N])
-        ev = {
-            "gap": gap.T.copy(),  # (N, ndx)
-            "r": r.T.copy(),  # (N, nr)
-            "c": c.T.copy(),  # (N, nc)
-            "rN": rN.reshape(1, m.nrN).copy(),
-            "cN": cN.reshape(1, m.ncN).copy(),
-        }
+        gap, r, c = gap.T.copy(), r.T.copy(), c.T.copy()  # (N, ndx), (N, nr), (N, nc)
+        rN, cN = rN.reshape(1, m.nrN).copy(), cN.reshape(1, m.ncN).copy()
         if self.x_init is not None:
-            ev["d0"] = self._difference(X[0], self.x_init)[0].reshape(m.ndx).copy()
+            d0 = self._difference(X[0], self.x_init)[0].reshape(m.ndx).copy()
         else:
-            ev["d0"] = np.zeros(m.ndx)
-        if not _all_finite(ev.values()):
+            d0 = np.zeros(m.ndx)
+        # one finiteness test: NaN and inf propagate through the sums (inf - inf is NaN)
+        if not math.isfinite(float(gap.sum() + r.sum() + c.sum() + rN.sum() + cN.sum()
+                                   + d0.sum())):
             return None
         lay = self._layout
-        eq = np.where(self._eq_rows, ev["c"][:, :m.nc_con] - lay.b, 0.0)
-        eqN = np.where(lay.term, ev["cN"][0, :m.ncN_con] - lay.bN, 0.0)
-        ev["eq_l1"] = float(np.sum(np.abs(eq)) + np.sum(np.abs(eqN)))
-        ev["cost"] = float(np.sum(self.Wr * ev["r"] ** 2) + np.sum(self.WrN * ev["rN"] ** 2))
-        ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
-        ev["gap_l1"] = float(np.sum(np.abs(ev["gap"])) + np.sum(np.abs(ev["d0"])))
-        ev["viol"] = float(max(
-            np.max(np.abs(ev["gap"]), initial=0.0), np.max(np.abs(ev["d0"]), initial=0.0),
-            np.max(np.abs(eq), initial=0.0), np.max(np.abs(eqN), initial=0.0),
-            np.max(self._al.violation(ev["c"]), initial=0.0),
-            np.max(self._alN.violation(ev["cN"]), initial=0.0)))
-        return ev
+        eq = np.abs(np.where(self._eq_rows, c[:, :m.nc_con] - lay.b, 0.0))
+        eqN = np.abs(np.where(lay.term, cN[0, :m.ncN_con] - lay.bN, 0.0))
+        abs_gap, abs_d0 = np.abs(gap), np.abs(d0)
+        return {
+            "gap": gap, "r": r, "c": c, "rN": rN, "cN": cN, "d0": d0,
+            "eq_l1": float(eq.sum() + eqN.sum()),
+            "cost": float(np.vdot(self.Wr, r * r) + np.vdot(self.WrN, rN * rN)),
+            "al": self._al.value(c) + self._alN.value(cN),
+            "gap_l1": float(abs_gap.sum() + abs_d0.sum()),
+            "viol": float(max(abs_gap.max(initial=0.0), abs_d0.max(initial=0.0),
+                              eq.max(initial=0.0), eqN.max(initial=0.0),
+                              self._al.violation(c).max(initial=0.0),
+                              self._alN.violation(cN).max(initial=0.0))),
+        }
 
     def _merit(self, ev: dict[str, Any], nu: float) -> float:
         return ev["cost"] + ev["al"] + nu * (ev["gap_l1"] + ev["eq_l1"])
@@ -265,10 +260,14 @@ class IlqrSolver(Solver):
         m, N = self.model, self.model.n_nodes
         wc, tc = self._al.weights_targets(ev["c"])
         wcN, tcN = self._alN.weights_targets(ev["cN"])
-        A, B, lx, lu, lxx, luu, lux, cx, cu = self._quadratise_fn(
-            X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T, tc.T)
-        lxN, lxxN, cxN = self._quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
-                                               tcN.T)
+        out = self._quadratise_fn(X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T, tc.T)
+        out_term = self._quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
+                                         tcN.T)
+        # one finiteness test on the contiguous outputs (NaN and inf propagate through sums)
+        if not math.isfinite(sum(float(a.sum()) for a in (*out, *out_term))):
+            return None
+        A, B, lx, lu, lxx, luu, lux, cx, cu = out
+        lxN, lxxN, cxN = out_term
         ndx, nu = m.ndx, m.nu
         q = {
             "A": _blocks(A, N, ndx, ndx), "B": _blocks(B, N, ndx, nu),
@@ -281,8 +280,6 @@ class IlqrSolver(Solver):
             q["cx"] = _blocks(cx, N, m.nc_con, ndx)
             q["cu"] = _blocks(cu, N, m.nc_con, nu)
             q["cxN"] = np.asarray(cxN).reshape(m.ncN_con, ndx)
-        if not _all_finite(q.values()):
-            return None
         return q
 
     def _retract(self, X, dX, alpha):
