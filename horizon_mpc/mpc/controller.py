@@ -83,7 +83,7 @@ class WalkingMpc:
         cfg: robot config (or its name); its ``mpc:`` section gives the settings.
         model: the symbolic model (built from the config when None).
         settings: overrides the config's ``mpc:`` section.
-        iterations: ILQR iterations per tick (None: the settings' ``iterations``, 2 by
+        iterations: ILQR iterations per tick (None: the settings' ``iterations``, 1 by
             default).
     """
 
