@@ -3,6 +3,7 @@
 import casadi as cs
 import numpy as np
 import pytest
+from ocps import pendulum_swing_up
 
 from horizon_mpc import Problem, make_solver
 from horizon_mpc.examples.cartpole import build_cartpole
@@ -91,19 +92,8 @@ def test_cartpole_swing_up_matches_ipopt(u_max):
 # violation while the multipliers were updated after every iteration
 @pytest.mark.parametrize("u_max", [6.0, 5.5])
 def test_pendulum_with_input_bounds_and_final_equality_matches_ipopt(u_max):
-    def build():
-        prb = Problem(60)
-        x = prb.create_state_variable("x", 2)
-        u = prb.create_input_variable("u", 1)
-        prb.set_dynamics(cs.vertcat(x[1], -9.81 * cs.sin(x[0]) + u))
-        prb.set_dt(0.05)
-        x.set_bounds([0, 0], [0, 0], nodes=0)
-        u.set_bounds(-u_max, u_max)
-        prb.create_cost("effort", u, weight=0.1)
-        prb.create_final_constraint("upright", x - np.array([np.pi, 0.0]))
-        return prb
-    ok_i, ipopt = _solve(build(), "ipopt")
-    ok_l, ilqr = _solve(build(), "ilqr", OPTS)
+    ok_i, ipopt = _solve(pendulum_swing_up(u_max), "ipopt")
+    ok_l, ilqr = _solve(pendulum_swing_up(u_max), "ilqr", OPTS)
     assert ok_i and ok_l
     assert abs(ilqr.stats.cost - ipopt.stats.cost) <= 1e-3 * ipopt.stats.cost
     assert ilqr.stats.constraint_violation <= 1e-6

@@ -1,10 +1,10 @@
 """ILQR inequality rows through the relaxed log barrier (``inequality='barrier'``)."""
 
-import casadi as cs
 import numpy as np
 import pytest
+from ocps import pendulum_swing_up
 
-from horizon_mpc import Problem, make_solver
+from horizon_mpc import make_solver
 from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian, relaxed_barrier
 
 
@@ -70,25 +70,11 @@ def test_unknown_inequality_mode_and_bad_barrier_parameters_are_refused():
         AugmentedLagrangian(lb, ub, 1.0, inequality="barrier", barrier_delta=0.0)
 
 
-def _pendulum(u_max: float, n: int = 60) -> Problem:
-    """Swing-up with a bounded torque and a final equality (the bound is active)."""
-    prb = Problem(n)
-    x = prb.create_state_variable("x", 2)
-    u = prb.create_input_variable("u", 1)
-    prb.set_dynamics(cs.vertcat(x[1], -9.81 * cs.sin(x[0]) + u))
-    prb.set_dt(0.05)
-    x.set_bounds([0, 0], [0, 0], nodes=0)
-    u.set_bounds(-u_max, u_max)
-    prb.create_cost("effort", u, weight=0.1)
-    prb.create_final_constraint("upright", x - np.array([np.pi, 0.0]))
-    return prb
-
-
 def test_a_small_barrier_approaches_the_augmented_lagrangian_optimum():
     u_max = 6.0
-    al = make_solver("ilqr", _pendulum(u_max), {"codegen": False, "max_iter": 400})
+    al = make_solver("ilqr", pendulum_swing_up(u_max), {"codegen": False, "max_iter": 400})
     assert al.solve()
-    bar = make_solver("ilqr", _pendulum(u_max), {
+    bar = make_solver("ilqr", pendulum_swing_up(u_max), {
         "codegen": False, "max_iter": 400, "inequality": "barrier", "barrier_mu": 1e-3,
         "barrier_delta": 1e-2})
     assert bar.solve(), bar.stats.status
@@ -103,10 +89,10 @@ def test_a_small_barrier_approaches_the_augmented_lagrangian_optimum():
 
 def test_a_large_barrier_keeps_the_solution_away_from_the_bound():
     u_max = 6.0
-    weak = make_solver("ilqr", _pendulum(u_max), {
+    weak = make_solver("ilqr", pendulum_swing_up(u_max), {
         "codegen": False, "max_iter": 400, "inequality": "barrier", "barrier_mu": 1e-3,
         "barrier_delta": 1e-2})
-    strong = make_solver("ilqr", _pendulum(u_max), {
+    strong = make_solver("ilqr", pendulum_swing_up(u_max), {
         "codegen": False, "max_iter": 400, "inequality": "barrier", "barrier_mu": 1.0,
         "barrier_delta": 1.0})
     assert weak.solve() and strong.solve()

@@ -162,14 +162,12 @@ class IlqrSolver(Solver):
         # stage rows: constraints, then x bounds, then u bounds
         lb, ub = np.full((N, m.nc), -np.inf), np.full((N, m.nc), np.inf)
         i = 0
-        # the terms' own arrays, read only (their public properties return copies)
         for con in m.stage_cons:
-            act = con._active[:N]
-            if self.x_init is not None and not con.uses_input and act[0]:
-                act = act.copy()
+            act = con.active[:N]
+            if self.x_init is not None and not con.uses_input:
                 act[0] = False  # a fixed initial state cannot be changed: nothing to enforce
-            lb[act, i:i + con.dim] = con._lb[:, :N].T[act]
-            ub[act, i:i + con.dim] = con._ub[:, :N].T[act]
+            lb[act, i:i + con.dim] = con.lower_bounds[:, :N].T[act]
+            ub[act, i:i + con.dim] = con.upper_bounds[:, :N].T[act]
             i += con.dim
         lb[:, i:i + m.nx], ub[:, i:i + m.nx] = xlb[:, :N].T, xub[:, :N].T
         i += m.nx
@@ -177,9 +175,9 @@ class IlqrSolver(Solver):
         lbN, ubN = np.full((1, m.ncN), -np.inf), np.full((1, m.ncN), np.inf)
         i = 0
         for con in m.term_cons:
-            if con._active[N]:
-                lbN[0, i:i + con.dim] = con._lb[:, N]
-                ubN[0, i:i + con.dim] = con._ub[:, N]
+            if con.active[N]:
+                lbN[0, i:i + con.dim] = con.lower_bounds[:, N]
+                ubN[0, i:i + con.dim] = con.upper_bounds[:, N]
             i += con.dim
         lbN[0, i:], ubN[0, i:] = xlb[:, N], xub[:, N]
         if self.opts["equality"] == "projection":
@@ -217,9 +215,9 @@ class IlqrSolver(Solver):
         """(n, rows) weight of each residual row on ``nodes`` (0 where its cost is off)."""
         if not costs:
             return np.zeros((n, 0))
-        active = np.array([c._active[nodes] for c in costs], dtype=float)  # (costs, n)
+        active = np.array([c.active[nodes] for c in costs], dtype=float)  # (costs, n)
         dims = [c.dim for c in costs]
-        return active.T.repeat(dims, axis=1) * np.concatenate([c._weight for c in costs])
+        return active.T.repeat(dims, axis=1) * np.concatenate([c.weight for c in costs])
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate(self, X: np.ndarray, U: np.ndarray) -> dict[str, Any] | None:

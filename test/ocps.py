@@ -1,0 +1,21 @@
+"""Small optimal control problems shared by the solver tests."""
+
+import casadi as cs
+import numpy as np
+
+from horizon_mpc import Problem
+
+
+def pendulum_swing_up(u_max: float, n_nodes: int = 60) -> Problem:
+    """Swing-up of an undamped pendulum in 3 s (60 x 0.05 s) with ``|u| <= u_max`` and the
+    upright state as a final equality; below ~6.5 the bound is active (it must pump)."""
+    prb = Problem(n_nodes)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.vertcat(x[1], -9.81 * cs.sin(x[0]) + u))
+    prb.set_dt(0.05)
+    x.set_bounds([0, 0], [0, 0], nodes=0)
+    u.set_bounds(-u_max, u_max)
+    prb.create_cost("effort", u, weight=0.1)
+    prb.create_final_constraint("upright", x - np.array([np.pi, 0.0]))
+    return prb
