@@ -243,3 +243,20 @@ def test_prepared_ticks_are_feedback_steps_that_trot_a_perfect_model(walking_mpc
     plan = mpc.update(t_next + dt + 0.010, plan.q[:, 1], plan.v[:, 1], cmd)
     assert plan.t0 == t_next + dt + 0.010 and mpc.prepare_misses == misses + 1
     assert mpc.solver.stats.status == "rti"
+
+
+def test_the_dynamics_pattern_covers_every_nonzero_of_the_walking_jacobians(walking_mpc):
+    """The compiled backward pass reads A and B only on the stage model's structural pattern:
+    every entry the quadratisation produces outside it must be exactly zero (go2: 5 %)."""
+    from horizon_mpc.solvers.ilqr import riccati_c
+
+    solver = walking_mpc.solver
+    next(_perfect_model_ticks(walking_mpc, [(0.3, 0.0, 0.0)]))
+    pattern = solver.model.ab_pattern
+    assert pattern.mean() < 0.1
+    solver._gather()
+    q = solver._quadratise(solver.X, solver.U, solver._evaluate(solver.X, solver.U))
+    outside = np.concatenate([q["A"], q["B"]], axis=2)[:, ~pattern]
+    assert outside.size and not outside.any()
+    if riccati_c.available():
+        assert solver._backward.keywords["pattern"].mask.sum() == pattern.sum()

@@ -8,6 +8,7 @@ states are stamped with it.
 from __future__ import annotations
 
 import copy
+import gc
 import itertools
 import math
 import os
@@ -46,6 +47,7 @@ from horizon_mpc.nodes.mpc_inputs import (
     command_from_twist,
     joints_from_joint_state,
 )
+from horizon_mpc.nodes import mpc_node
 from horizon_mpc.nodes.mpc_node import MpcNode
 from horizon_mpc.posture import standing_configuration
 
@@ -577,3 +579,16 @@ def test_prepare_ahead_diagnostics_report_both_phases(context, walking_mpc):
     finally:
         walking_mpc.settings.prepare_ahead = False
         node.destroy_node()
+
+
+def test_the_executable_freezes_what_startup_allocated_out_of_the_collector(monkeypatch):
+    """A full collection over the startup objects (~11 ms with go2) must not land in a tick:
+    ``main`` builds the node, then freezes everything alive."""
+    startup = [object()]
+    monkeypatch.setattr(mpc_node, "MpcNode", lambda: startup[0])
+    gc.unfreeze()
+    try:
+        assert mpc_node._node_with_frozen_startup() is startup[0]
+        assert gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()

@@ -108,6 +108,53 @@ def test_go2_sizes_match_numpy(isa, with_projection):
     _assert_same(riccati_c.backward_pass_c(*args, 1e-6, proj), backward_pass(*args, 1e-6, proj))
 
 
+def _sparse_dynamics(args, seed=7):
+    """``args`` with A = I + a few couplings, B nonzero on a band (a legged robot's Euler
+    step), and its pattern with one extra structural entry that is numerically zero."""
+    A, B = args[0], args[1]
+    N, ndx, nu = B.shape
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((ndx, ndx + nu), bool)
+    mask[:, :ndx] = np.eye(ndx, dtype=bool) | (rng.random((ndx, ndx)) < 0.1)
+    mask[:, ndx:] = rng.random((ndx, nu)) < 0.15
+    mask[0, ndx] = True
+    out = list(args)
+    out[0] = np.where(mask[:, :ndx], A, 0.0)
+    out[1] = np.where(mask[:, ndx:], B, 0.0)
+    out[1][:, 0, 0] = 0.0
+    return out, riccati_c.AbPattern.from_mask(mask)
+
+
+@pytest.mark.parametrize("with_projection", [False, True])
+@pytest.mark.parametrize("ndx, nu", [(7, 5), (36, 30)])
+def test_sparse_dynamics_pattern_matches_numpy(isa, with_projection, ndx, nu):
+    """The recursion reading A and B by their pattern gives the dense result."""
+    args, pattern = _sparse_dynamics(_lq(N=8, ndx=ndx, nu=nu, seed=2))
+    proj = _projection(args, n_rows=min(nu - 1, 12)) if with_projection else None
+    want = backward_pass(*args, 1e-6, proj)
+    _assert_same(riccati_c.backward_pass_c(*args, 1e-6, proj, pattern=pattern), want)
+    views = _column_major_views(args)  # the solver's layout
+    _assert_same(riccati_c.backward_pass_c(*views, 1e-6, proj, pattern=pattern), want)
+
+
+def test_entries_outside_the_pattern_are_not_read(isa):
+    args, pattern = _sparse_dynamics(_lq(N=6, ndx=6, nu=4))
+    want = riccati_c.backward_pass_c(*args, 1e-6, pattern=pattern)
+    noisy = list(args)
+    noisy[0] = np.where(pattern.mask[:, :6], args[0], 1e3)
+    noisy[1] = np.where(pattern.mask[:, 6:], args[1], np.nan)
+    _assert_same(riccati_c.backward_pass_c(*noisy, 1e-6, pattern=pattern), want)
+
+
+def test_pattern_of_the_wrong_shape_is_refused(compiled):
+    args = _lq(N=2, ndx=3, nu=2)
+    with pytest.raises(ValueError, match=r"pattern has shape \(3, 4\); expected \(3, 5\)"):
+        riccati_c.backward_pass_c(*args, 0.0, pattern=riccati_c.AbPattern.from_mask(
+            np.ones((3, 4), bool)))
+    with pytest.raises(ValueError, match="expected \\(ndx, ndx \\+ nu\\)"):
+        riccati_c.AbPattern.from_mask(np.ones((3, 2), bool))
+
+
 def test_transposed_views_are_read_through_their_strides(isa):
     args = _lq(N=9, ndx=6, nu=4)
     proj = _projection(args)

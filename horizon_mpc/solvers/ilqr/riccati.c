@@ -98,6 +98,10 @@ static int use_avx2(int variant) { return variant != 1 && riccati_has_avx2(); }
  *      row, column; the 1-D lxN uses the first of its triple, the 2-D lxxN the first two).
  *  mu: added to the diagonal of every Q_uu.
  *  con: N flags (node with projected equality rows) or NULL.
+ *  pat: NULL (A and B dense) or the structural nonzeros of [A | B] (ndx x (ndx + nu)), the
+ *      same at every node, in compressed columns: column pointers (ndx + nu + 1 ints), then
+ *      the row of each nonzero, ascending in each column. Entries outside it are not read
+ *      (taken as zero). The products with A and B then cost O(nnz ndx), not O(ndx^3).
  *  out[N_OUT]: K (N, nu, ndx), k (N, nu), S (N+1, ndx, ndx), s (N+1, ndx), Qu (N, nu),
  *      Quu (N, nu, nu), Qux (N, nu, ndx), all C-contiguous.
  *  variant: 0 automatic, 1 baseline ISA.
@@ -105,22 +109,26 @@ static int use_avx2(int variant) { return variant != 1 && riccati_has_avx2(); }
  * finite at node *fail_node; -1: out of memory.
  */
 int riccati_backward(int N, int ndx, int nu, const double *const *in, const int64_t *st,
-                     double mu, const uint8_t *con, double *const *out, int variant,
-                     int *fail_node)
+                     double mu, const uint8_t *con, const int *pat, double *const *out,
+                     int variant, int *fail_node)
 {
     double *w = malloc(sizeof(double) * (workspace_size(ndx, nu) + 1));
+    double *vals = malloc(sizeof(double) * ((pat ? (size_t)pat[ndx + nu] : 0) + 1));
     int *cols = malloc(sizeof(int) * ((size_t)nu + 1));
     int ret = -1;
     *fail_node = -1;
-    if (w && cols) {
+    if (w && vals && cols) {
 #if HAVE_AVX2
         if (use_avx2(variant))
-            ret = backward_avx2(N, ndx, nu, in, st, mu, con, out, fail_node, w, cols);
+            ret = backward_avx2(N, ndx, nu, in, st, mu, con, pat, out, fail_node, w, vals,
+                                cols);
         else
 #endif
-            ret = backward_base(N, ndx, nu, in, st, mu, con, out, fail_node, w, cols);
+            ret = backward_base(N, ndx, nu, in, st, mu, con, pat, out, fail_node, w, vals,
+                                cols);
     }
     free(cols);
+    free(vals);
     free(w);
     return ret;
 }
@@ -448,14 +456,15 @@ static void chol_solve_vec(int n, const double *U, double *x)
 
 /* The recursion (see riccati_backward); w: workspace_size doubles, cols: nu ints. */
 static int backward(int N, int ndx, int nu, const double *const *in, const int64_t *st,
-                    double mu, const uint8_t *con, double *const *out, int *fail_node,
-                    double *w, int *cols)
+                    double mu, const uint8_t *con, const int *pat, double *const *out,
+                    int *fail_node, double *w, double *vals, int *cols)
 {
     const int m = ndx + nu;
     double *K = out[OUT_K], *kff = out[OUT_KFF], *S = out[OUT_S], *s = out[OUT_SV];
     double *Qu_all = out[OUT_QU], *Quu_all = out[OUT_QUU], *Qux_all = out[OUT_QUX];
     double *AB = w;                 /* ndx x m: [A_i | B_i] */
-    double *SAB = AB + ndx * m;     /* ndx x m: S_{i+1} [A_i | B_i] */
+    double *SAB = AB + ndx * m;     /* ndx x m: S_{i+1} [A_i | B_i] (pattern: m x ndx, its
+                                     * transpose) */
     double *fi = SAB + ndx * m;     /* ndx: f_i */
     double *g = fi + ndx;           /* ndx: s_{i+1} + S_{i+1} f_i */
     double *qx = g + ndx;           /* ndx: Q_x */
@@ -483,25 +492,61 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
         double *Qux = Qux_all + (size_t)i * nu * ndx;
 
         /* g = s' + S' f; Q_x = l_x + A^T g, Q_u = l_u + B^T g */
-        get_mat(ndx, ndx, EL(IN_A, i, 0, 0), st[3 * IN_A + 1], st[3 * IN_A + 2], AB, m);
-        get_mat(ndx, nu, EL(IN_B, i, 0, 0), st[3 * IN_B + 1], st[3 * IN_B + 2], AB + ndx, m);
         get_vec(ndx, EL(IN_F, i, 0, 0), st[3 * IN_F + 1], fi);
         for (int r = 0; r < ndx; r++) g[r] = sn[r] + dot(ndx, Sn + r * ndx, fi);
-        for (int c = 0; c < m; c++) acc[c] = 0.0;
-        for (int r = 0; r < ndx; r++) axpy(m, g[r], AB + r * m, acc);
         get_vec(ndx, EL(IN_LX, i, 0, 0), st[3 * IN_LX + 1], qx);
         get_vec(nu, EL(IN_LU, i, 0, 0), st[3 * IN_LU + 1], Qu);
-        for (int r = 0; r < ndx; r++) qx[r] += acc[r];
-        for (int r = 0; r < nu; r++) Qu[r] += acc[ndx + r];
-        /* S' [A B]; Q_xx = l_xx + A^T S' A (into S_i), Q_ux = l_ux + B^T S' A,
-         * Q_uu = l_uu + B^T S' B + mu I */
-        gemm(ndx, m, ndx, Sn, ndx, 1, AB, m, SAB, m, 0);
         get_mat(ndx, ndx, EL(IN_LXX, i, 0, 0), st[3 * IN_LXX + 1], st[3 * IN_LXX + 2], Si, ndx);
-        gemm(ndx, ndx, ndx, AB, 1, m, SAB, m, Si, ndx, 1);
         get_mat(nu, ndx, EL(IN_LUX, i, 0, 0), st[3 * IN_LUX + 1], st[3 * IN_LUX + 2], Qux, ndx);
-        gemm(nu, ndx, ndx, AB + ndx, 1, m, SAB, m, Qux, ndx, 1);
         get_mat(nu, nu, EL(IN_LUU, i, 0, 0), st[3 * IN_LUU + 1], st[3 * IN_LUU + 2], Quu, nu);
-        gemm(nu, nu, ndx, AB + ndx, 1, m, SAB + ndx, m, Quu, nu, 1);
+        if (pat) {
+            /* [A B] by its structural nonzeros (CSC): Yt = [A B]^T S' row by row (an axpy of
+             * a row of S' per nonzero), then Q_xx += Yt_A A, Q_ux += Yt_B A, Q_uu += Yt_B B
+             * by the columns of the pattern */
+            const int *cp = pat, *ri = pat + m + 1;
+            for (int j = 0; j < m; j++) {
+                double *yt = SAB + (size_t)j * ndx, a = 0.0;
+                for (int c = 0; c < ndx; c++) yt[c] = 0.0;
+                for (int p = cp[j]; p < cp[j + 1]; p++) {
+                    double v = j < ndx ? *EL(IN_A, i, ri[p], j) : *EL(IN_B, i, ri[p], j - ndx);
+                    vals[p] = v;
+                    a += v * g[ri[p]];
+                    axpy(ndx, v, Sn + (size_t)ri[p] * ndx, yt);
+                }
+                if (j < ndx) qx[j] += a;
+                else Qu[j - ndx] += a;
+            }
+            for (int j = 0; j < m; j++) {
+                const double *yt = SAB + (size_t)j * ndx;
+                double *qa = j < ndx ? Si + (size_t)j * ndx : Qux + (size_t)(j - ndx) * ndx;
+                for (int k = 0; k < ndx; k++) {
+                    double a = 0.0;
+                    for (int p = cp[k]; p < cp[k + 1]; p++) a += vals[p] * yt[ri[p]];
+                    qa[k] += a;
+                }
+                if (j < ndx) continue;
+                double *qb = Quu + (size_t)(j - ndx) * nu;
+                for (int k = 0; k < nu; k++) {
+                    double a = 0.0;
+                    for (int p = cp[ndx + k]; p < cp[ndx + k + 1]; p++) a += vals[p] * yt[ri[p]];
+                    qb[k] += a;
+                }
+            }
+        } else {
+            get_mat(ndx, ndx, EL(IN_A, i, 0, 0), st[3 * IN_A + 1], st[3 * IN_A + 2], AB, m);
+            get_mat(ndx, nu, EL(IN_B, i, 0, 0), st[3 * IN_B + 1], st[3 * IN_B + 2], AB + ndx,
+                    m);
+            for (int c = 0; c < m; c++) acc[c] = 0.0;
+            for (int r = 0; r < ndx; r++) axpy(m, g[r], AB + r * m, acc);
+            for (int r = 0; r < ndx; r++) qx[r] += acc[r];
+            for (int r = 0; r < nu; r++) Qu[r] += acc[ndx + r];
+            /* S' [A B]; Q_xx = l_xx + A^T S' A (into S_i), Q_ux = l_ux + B^T S' A,
+             * Q_uu = l_uu + B^T S' B */
+            gemm(ndx, m, ndx, Sn, ndx, 1, AB, m, SAB, m, 0);
+            gemm(ndx, ndx, ndx, AB, 1, m, SAB, m, Si, ndx, 1);
+            gemm(nu, ndx, ndx, AB + ndx, 1, m, SAB, m, Qux, ndx, 1);
+            gemm(nu, nu, ndx, AB + ndx, 1, m, SAB + ndx, m, Quu, nu, 1);
+        }
         for (int r = 0; r < nu; r++) Quu[r * nu + r] += mu;
 
         if (con && con[i]) {
@@ -542,12 +587,12 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
             gemm(nu, ndx, r, Zc, r, 1, W, ndx, Ki, ndx, 0);
             for (int p = 0; p < nu * ndx; p++) Ki[p] = Px[p] - Ki[p];
             for (int a = 0; a < nu; a++) ki[a] = Pe[a] - dot(r, Zc + a * r, wk);
-            /* S_i = Q_xx + K^T (Q_uu K + Q_ux) + Q_ux^T K;
-             * s_i = Q_x + K^T (Q_uu k + Q_u) + Q_ux^T k */
-            copy(nu * ndx, Qux, T);
+            /* S_i = Q_xx + K^T Q_uu K + K^T Q_ux + Q_ux^T K: the symmetric part of
+             * Q_xx + K^T (Q_uu K + 2 Q_ux), which the symmetrisation below takes (one
+             * product fewer); s_i = Q_x + K^T (Q_uu k + Q_u) + Q_ux^T k */
+            for (int p = 0; p < nu * ndx; p++) T[p] = 2.0 * Qux[p];
             gemm(nu, ndx, nu, Quu, nu, 1, Ki, ndx, T, ndx, 1);
             gemm(ndx, ndx, nu, Ki, 1, ndx, T, ndx, Si, ndx, 1);
-            gemm(ndx, ndx, nu, Qux, 1, ndx, Ki, ndx, Si, ndx, 1);
             for (int a = 0; a < nu; a++) v[a] = dot(nu, Quu + a * nu, ki) + Qu[a];
             for (int c = 0; c < ndx; c++) acc[c] = 0.0;
             for (int a = 0; a < nu; a++) {

@@ -35,6 +35,7 @@ import shutil
 import subprocess
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -43,8 +44,8 @@ from horizon_mpc import codegen
 from horizon_mpc.solvers.ilqr.equality import Projection
 from horizon_mpc.solvers.ilqr.riccati import BackwardResult
 
-__all__ = ["available", "backward_pass_c", "library_path", "linear_rollout_c", "project_rows_c",
-           "uses_avx2"]
+__all__ = ["AbPattern", "available", "backward_pass_c", "library_path", "linear_rollout_c",
+           "project_rows_c", "uses_avx2"]
 
 _log = logging.getLogger(__name__)
 
@@ -139,7 +140,8 @@ def _load() -> ctypes.CDLL:
 
 def _bind(lib: ctypes.CDLL) -> ctypes.CDLL:
     p, i, d = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
-    lib.riccati_backward.argtypes = [i, i, i, ctypes.POINTER(p), p, d, p, ctypes.POINTER(p), i, p]
+    lib.riccati_backward.argtypes = [i, i, i, ctypes.POINTER(p), p, d, p, p, ctypes.POINTER(p), i,
+                                     p]
     lib.riccati_backward.restype = i
     lib.riccati_rollout.argtypes = [i, i, i, ctypes.POINTER(p), p, p, p, i]
     lib.riccati_rollout.restype = i
@@ -208,6 +210,37 @@ def _strided(items: list[tuple[str, object, tuple[int, ...]]],
     return (ctypes.c_void_p * n)(*ptrs), st // 8, keep
 
 
+@dataclass(frozen=True)
+class AbPattern:
+    """The structural nonzeros of ``[A | B]`` (the same at every node), for
+    :func:`backward_pass_c`: its products with A and B then cost O(nnz ndx) instead of
+    O(ndx^3). Entries of A and B outside the pattern are never read (taken as zero).
+
+    Build it with :meth:`from_mask`; ``data`` is the compressed-column form the C code reads
+    (int32: ``ndx + nu + 1`` column pointers, then the row of each nonzero).
+    """
+
+    mask: np.ndarray  # (ndx, ndx + nu) bool
+    data: np.ndarray
+
+    @classmethod
+    def from_mask(cls, mask: np.ndarray) -> AbPattern:
+        """From a boolean (ndx, ndx + nu) mask of the entries that may be nonzero."""
+        mask = np.array(mask, dtype=bool)
+        if mask.ndim != 2 or mask.shape[1] < mask.shape[0]:
+            raise ValueError(f"the pattern of [A | B] has shape {mask.shape}; expected "
+                             "(ndx, ndx + nu)")
+        col, row = np.nonzero(mask.T)  # by column, rows ascending within each
+        pointers = np.concatenate([[0], np.cumsum(np.bincount(col, minlength=mask.shape[1]))])
+        mask.setflags(write=False)
+        return cls(mask, np.concatenate([pointers, row]).astype(np.int32))
+
+    @property
+    def density(self) -> float:
+        """Fraction of the entries of [A | B] in the pattern."""
+        return float(self.mask.mean()) if self.mask.size else 1.0
+
+
 def _sizes(B) -> tuple[int, int, int]:
     """(N, ndx, nu) from the shape of B."""
     shape = np.shape(B)
@@ -217,7 +250,8 @@ def _sizes(B) -> tuple[int, int, int]:
 
 
 def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
-                    proj: Projection | None = None) -> BackwardResult | None:
+                    proj: Projection | None = None,
+                    pattern: AbPattern | None = None) -> BackwardResult | None:
     """Riccati recursion with regularisation ``mu`` on Q_uu, in C; see
     :func:`.riccati.backward_pass` for the maths.
 
@@ -227,6 +261,9 @@ def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
             stage cost models; lxN (ndx,), lxxN (ndx, ndx): terminal ones.
         mu: Levenberg-Marquardt term added to the diagonal of every Q_uu.
         proj: null-space projection of the equality rows (:func:`.equality.project`).
+        pattern: the structural nonzeros of [A | B] (None: dense); entries outside it must
+            be zero, they are not read. Worth it when sparse: go2's walking dynamics fill
+            5 % of it, and the recursion takes about half the time.
 
     Returns:
         :class:`.riccati.BackwardResult` (K, k, S, s, Qu, Quu, Qux), or None when a (reduced)
@@ -238,6 +275,8 @@ def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
     """
     lib = _load()
     N, ndx, nu = _sizes(B)
+    if pattern is not None and pattern.mask.shape != (ndx, ndx + nu):
+        raise ValueError(f"pattern has shape {pattern.mask.shape}; expected {(ndx, ndx + nu)}")
     items = [("A", A, (N, ndx, ndx)), ("B", B, (N, ndx, nu)), ("lx", lx, (N, ndx)),
              ("lu", lu, (N, nu)), ("lxx", lxx, (N, ndx, ndx)), ("luu", luu, (N, nu, nu)),
              ("lux", lux, (N, nu, ndx)), ("f", f, (N, ndx)), ("lxN", lxN, (ndx,)),
@@ -263,8 +302,9 @@ def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
         pos += n
     fail = ctypes.c_int(-1)
     ret = lib.riccati_backward(N, ndx, nu, ptrs, strides.ctypes.data, float(mu),
-                               None if con is None else con.ctypes.data, out_ptrs, _variant(),
-                               ctypes.byref(fail))
+                               None if con is None else con.ctypes.data,
+                               None if pattern is None else pattern.data.ctypes.data, out_ptrs,
+                               _variant(), ctypes.byref(fail))
     if ret == -1:
         raise MemoryError("riccati_backward: out of memory for its workspace")
     if ret != 0:

@@ -19,6 +19,7 @@ the choice for one iteration per MPC tick). Nothing the problem declares is drop
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -37,6 +38,9 @@ from horizon_mpc.solvers.ilqr.stages import build_stage_model
 __all__ = ["IlqrSolver"]
 
 log = logging.getLogger(__name__)
+
+# the compiled backward pass reads A and B by their pattern below this density of nonzeros
+SPARSE_DYNAMICS = 0.25
 
 
 def _blocks(out: np.ndarray, n: int, rows: int, cols: int) -> np.ndarray:
@@ -134,9 +138,13 @@ class IlqrSolver(Solver):
         self._quadratise_all: BufferedFunction | None = None  # every row's AL terms, on demand
         self._quadratise_term = BufferedFunction(m.quadratise_term)
         self._integrate = BufferedFunction(m.integrate)
-        # the Riccati recursion in compiled C when available (numpy loop otherwise)
+        # the Riccati recursion in compiled C when available (numpy loop otherwise); sparse
+        # dynamics Jacobians (go2 walking: 5 % of [A | B]) by their pattern
         if self.opts["codegen"] and riccati_c.available():
             self._backward, self._rollout = riccati_c.backward_pass_c, riccati_c.linear_rollout_c
+            if m.ab_pattern is not None and m.ab_pattern.mean() <= SPARSE_DYNAMICS:
+                self._backward = functools.partial(
+                    riccati_c.backward_pass_c, pattern=riccati_c.AbPattern.from_mask(m.ab_pattern))
         else:
             self._backward, self._rollout = riccati.backward_pass, riccati.linear_rollout
         self.feedback_gains = np.zeros((N, m.nu, m.ndx))

@@ -64,6 +64,9 @@ class StageModel:
     quadratise_term: cs.Function
     integrate: cs.Function  # (x, dx) -> x, mapped over N+1 nodes
     difference: cs.Function  # (x0, x1) -> dx, mapped over N+1 nodes
+    # (ndx, ndx + nu) structural nonzeros of [A | B] (the same at every node): the rest of
+    # the dense outputs A and B is exactly zero
+    ab_pattern: np.ndarray | None = None
     # (nc,) stage rows whose augmented-Lagrangian Gauss-Newton terms ``quadratise`` forms;
     # the others (equalities the projection handles) are left out: a third fewer operations
     # on the go2 walking problem. ``quadratise_full()`` builds the one with every row.
@@ -178,6 +181,10 @@ def build_stage_model(prb: Problem, codegen: bool = True,
     f_dx = prb.difference_expr(x_ref, x_next)
     A = cs.substitute(at0(_jac(f_dx, dx)), x_ref, x_next_nom)
     B = cs.substitute(at0(_jac(f_dx, u)), x_ref, x_next_nom)
+    ab_pattern = np.zeros((ndx, ndx + nu), bool)
+    for block, offset in ((A, 0), (B, ndx)):
+        rows, cols = block.sparsity().get_triplet()
+        ab_pattern[np.asarray(rows, int), offset + np.asarray(cols, int)] = True
     r = stack(stage_costs, xt, u)
     c = cs.vertcat(stack(stage_cons, xt, u), xt, u)
     rx, ru = at0(_jac(r, dx)), at0(_jac(r, u))
@@ -247,4 +254,5 @@ def build_stage_model(prb: Problem, codegen: bool = True,
         difference=diff.map(N + 1, "serial"),
         al_rows=al_rows,
         quadratise_full=quadratise_full,
+        ab_pattern=ab_pattern,
     )
