@@ -222,12 +222,15 @@ def test_prepared_ticks_are_feedback_steps_that_trot_a_perfect_model(walking_mpc
         eq = np.where(sv._eq_rows, ev["c"][:, :sv.model.nc_con] - sv._layout.b, 0.0)
         head.append(max(np.abs(eq[:5]).max(), np.abs(ev["gap"][:5]).max()))
     assert mpc.prepare_misses == misses
-    # the start of the gait (new swing constraints) is not feasible at once; after it the
-    # ticks stay within what whole ticks reach (<= 0.86 at lift-offs with one iteration per
-    # tick, at the horizon's last nodes, new to the problem at each tick); the nodes a tick
+    # the start of the gait (new swing constraints; its first lift-offs enter the horizon's
+    # last nodes up to tick ~12 with 24 nodes) is not feasible at once; after it the ticks
+    # stay within what whole ticks reach (<= 0.86 at lift-offs with one iteration per tick,
+    # at the horizon's last nodes, new to the problem at each tick); the nodes a tick
     # applies are consistent
-    assert max(violations[10:]) < 1.0 and np.median(violations) < 0.2
-    assert np.median(head) < 1e-3 and max(head[10:]) < 0.1
+    assert max(violations[15:]) < 1.0 and np.median(violations) < 0.2
+    # (median head residual: 1.5e-3 with 24 nodes, 4e-4 with 30, 8e-5 with 40: a longer
+    # horizon keeps its first nodes closer to feasible between ticks)
+    assert np.median(head) < 3e-3 and max(head[10:]) < 0.1
     assert plan.q[0, 0] - q0[0] > 0.15  # 0.8 s, with the 1 m/s^2 ramp to 0.3 m/s
     # a state stamped 3 ms before the prepared time is predicted to it
     t_next = 41 * dt
