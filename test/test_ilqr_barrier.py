@@ -62,6 +62,32 @@ def test_barrier_rows_get_the_newton_model_of_their_barrier():
     assert np.all(al.rho[:, :3] == 100.0)
 
 
+def test_the_reused_barrier_terms_follow_the_rows_values_bounds_and_parameters():
+    """The last barrier evaluation is reused for equal input only: a row changed in place,
+    new bounds or a new barrier weight give fresh terms."""
+    lb = np.array([[-1.0, 0.0, -np.inf]] * 3)
+    ub = np.array([[1.0, np.inf, 0.5]] * 3)
+    al = AugmentedLagrangian(lb, ub, 10.0, inequality="barrier")
+
+    def fresh(c, lb=lb, ub=ub, mu=1.0):
+        return AugmentedLagrangian(lb, ub, 10.0, inequality="barrier", barrier_mu=mu).value(c)
+
+    c = np.full((3, 3), 0.2)
+    assert al.value(c) == fresh(c)
+    c[1, 1] = -0.7  # in place
+    assert al.value(c) == fresh(c)
+    w, t = al.weights_targets(c)
+    w2, t2 = AugmentedLagrangian(lb, ub, 10.0, inequality="barrier").weights_targets(c)
+    np.testing.assert_array_equal(w, w2)
+    np.testing.assert_array_equal(t, t2)
+    lb2 = lb.copy()
+    lb2[:, 0] = -0.5
+    al.set_bounds(lb2, ub)
+    assert al.value(c) == fresh(c, lb=lb2)
+    al.mu = 0.1
+    assert al.value(c) == fresh(c, lb=lb2, mu=0.1)
+
+
 def test_unknown_inequality_mode_and_bad_barrier_parameters_are_refused():
     lb, ub = np.zeros((2, 1)), np.ones((2, 1))
     with pytest.raises(ValueError, match="inequality"):

@@ -33,6 +33,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from horizon_mpc.mpc.controller import WalkingMpc
+from horizon_mpc.nodes import mpc_node
 from horizon_mpc.nodes.conversions import (
     NS_PER_S,
     joint_state_to_msg,
@@ -47,7 +48,6 @@ from horizon_mpc.nodes.mpc_inputs import (
     command_from_twist,
     joints_from_joint_state,
 )
-from horizon_mpc.nodes import mpc_node
 from horizon_mpc.nodes.mpc_node import MpcNode
 from horizon_mpc.posture import standing_configuration
 

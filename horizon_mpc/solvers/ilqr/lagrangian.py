@@ -100,6 +100,7 @@ class AugmentedLagrangian:
         self._bu, self._bl = self.ub.ravel()[self._iu], self.lb.ravel()[self._il]
         self._isides = np.concatenate((self._iu, self._il))
         self._irows = np.flatnonzero(self.has_up | self.has_lo)
+        self._barrier_memo = None
 
     def violation(self, c: np.ndarray) -> np.ndarray:
         """Per-row violation ``max(lb - c, c - ub, 0)``, shape of ``c``."""
@@ -111,10 +112,19 @@ class AugmentedLagrangian:
     def _barrier_terms(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Barrier value, dB/dc and d2B/dc2 of the barrier sides, flat (upper sides, then
         lower sides: index ``self._iu``, ``self._il`` into ``c.ravel()``)."""
+        # one evaluation's rows are asked for their value, then their Gauss-Newton model
+        # (and again after a multiplier update): the last result is reused for equal input
+        memo = self._barrier_memo
+        if (memo is not None and memo[1] == (self.mu, self.delta) and memo[0].shape == c.shape
+                and np.array_equal(memo[0], c)):
+            return memo[2]
         cf = c.ravel()
         slack = np.concatenate((self._bu - cf[self._iu], cf[self._il] - self._bl))
         value, d1, d2 = relaxed_barrier(slack, self.mu, self.delta)
         d1[:self._iu.size] *= -1.0  # slack ub - c: dB/dc = -B'
+        for a in (value, d1, d2):
+            a.setflags(write=False)
+        self._barrier_memo = (c.copy(), (self.mu, self.delta), (value, d1, d2))
         return value, d1, d2
 
     def value(self, c: np.ndarray) -> float:
