@@ -263,7 +263,7 @@ def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
         proj: null-space projection of the equality rows (:func:`.equality.project`).
         pattern: the structural nonzeros of [A | B] (None: dense); entries outside it must
             be zero, they are not read. Worth it when sparse: go2's walking dynamics fill
-            5 % of it, and a go2 pass (24 nodes) takes 0.68 ms instead of 0.87.
+            5 % of it, and a go2 pass (30 nodes) takes 0.68 ms instead of 0.87.
 
     Returns:
         :class:`.riccati.BackwardResult` (K, k, S, s, Qu, Quu, Qux), or None when a (reduced)
