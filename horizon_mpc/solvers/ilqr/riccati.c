@@ -463,8 +463,8 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
     double *K = out[OUT_K], *kff = out[OUT_KFF], *S = out[OUT_S], *s = out[OUT_SV];
     double *Qu_all = out[OUT_QU], *Quu_all = out[OUT_QUU], *Qux_all = out[OUT_QUX];
     double *AB = w;                 /* ndx x m: [A_i | B_i] */
-    double *SAB = AB + ndx * m;     /* ndx x m: S_{i+1} [A_i | B_i] (pattern: m x ndx, its
-                                     * transpose) */
+    double *SAB = AB + ndx * m;     /* ndx x m: S_{i+1} [A_i | B_i] (pattern: m x ndx,
+                                     * [A_i | B_i]^T S_{i+1}) */
     double *fi = SAB + ndx * m;     /* ndx: f_i */
     double *g = fi + ndx;           /* ndx: s_{i+1} + S_{i+1} f_i */
     double *qx = g + ndx;           /* ndx: Q_x */

@@ -142,9 +142,10 @@ class IlqrSolver(Solver):
         # dynamics Jacobians (go2 walking: 5 % of [A | B]) by their pattern
         if self.opts["codegen"] and riccati_c.available():
             self._backward, self._rollout = riccati_c.backward_pass_c, riccati_c.linear_rollout_c
-            if m.ab_pattern is not None and m.ab_pattern.mean() <= SPARSE_DYNAMICS:
-                self._backward = functools.partial(
-                    riccati_c.backward_pass_c, pattern=riccati_c.AbPattern.from_mask(m.ab_pattern))
+            pattern = None if m.ab_pattern is None else riccati_c.AbPattern.from_mask(
+                m.ab_pattern)
+            if pattern is not None and pattern.density <= SPARSE_DYNAMICS:
+                self._backward = functools.partial(riccati_c.backward_pass_c, pattern=pattern)
         else:
             self._backward, self._rollout = riccati.backward_pass, riccati.linear_rollout
         self.feedback_gains = np.zeros((N, m.nu, m.ndx))

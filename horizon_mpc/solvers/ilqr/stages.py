@@ -109,6 +109,14 @@ def _gn(res, jx, ju, w, t):
     return lx, 2 * cs.mtimes(ju.T, e), lxx, 2 * cs.mtimes(ju.T, wju), 2 * cs.mtimes(ju.T, wjx)
 
 
+def _structure(expr: cs.SX) -> np.ndarray:
+    """Boolean (rows, cols) mask of the structural nonzeros of a matrix expression."""
+    mask = np.zeros(expr.shape, bool)
+    rows, cols = expr.sparsity().get_triplet()
+    mask[np.asarray(rows, int), np.asarray(cols, int)] = True
+    return mask
+
+
 def _input_reach(cons, x, u, s, p, x_next, terminal: bool = False) -> np.ndarray:
     """Rows an input can move in one step (structurally): a row on (x, u) through u, a
     state-only row through the dynamics ``x_next = F(x, u)`` (relative degree one)."""
@@ -118,11 +126,7 @@ def _input_reach(cons, x, u, s, p, x_next, terminal: bool = False) -> np.ndarray
             expr = con.function(x, u, s, p)
         else:
             expr = con.function(x_next, u, s, p)
-        jac = cs.jacobian(expr, u) if u.numel() else cs.SX(expr.numel(), 0)
-        nnz = np.zeros(expr.numel(), int)
-        row_idx, _ = jac.sparsity().get_triplet()
-        np.add.at(nnz, np.asarray(row_idx, int), 1)
-        rows.append(nnz > 0)
+        rows.append(_structure(_jac(expr, u)).any(axis=1))
     return np.concatenate(rows) if rows else np.zeros(0, bool)
 
 
@@ -181,10 +185,7 @@ def build_stage_model(prb: Problem, codegen: bool = True,
     f_dx = prb.difference_expr(x_ref, x_next)
     A = cs.substitute(at0(_jac(f_dx, dx)), x_ref, x_next_nom)
     B = cs.substitute(at0(_jac(f_dx, u)), x_ref, x_next_nom)
-    ab_pattern = np.zeros((ndx, ndx + nu), bool)
-    for block, offset in ((A, 0), (B, ndx)):
-        rows, cols = block.sparsity().get_triplet()
-        ab_pattern[np.asarray(rows, int), offset + np.asarray(cols, int)] = True
+    ab_pattern = np.hstack((_structure(A), _structure(B)))
     r = stack(stage_costs, xt, u)
     c = cs.vertcat(stack(stage_cons, xt, u), xt, u)
     rx, ru = at0(_jac(r, dx)), at0(_jac(r, u))
