@@ -123,3 +123,42 @@ def test_a_large_barrier_keeps_the_solution_away_from_the_bound():
         "barrier_delta": 1.0})
     assert weak.solve() and strong.solve()
     assert np.max(np.abs(strong.solution["u"])) < np.max(np.abs(weak.solution["u"]))
+
+
+@pytest.mark.parametrize("mode", ["barrier", "lagrangian"])
+def test_the_compiled_rows_match_numpy_in_both_modes(mode):
+    """AugmentedLagrangian in one compiled pass (riccati_c.AlRowsKernel) against its numpy
+    path: equalities, one- and two-sided rows, rows without bounds, active and inactive
+    multipliers, values inside and past the barrier's relaxation."""
+    from horizon_mpc.solvers.ilqr import riccati_c
+
+    if not riccati_c.available():
+        pytest.skip("no compiled library (no C compiler or HORIZON_MPC_NO_CODEGEN)")
+    rng = np.random.default_rng(11)
+    lb = rng.normal(size=(9, 13))
+    ub = lb + rng.uniform(0.1, 2.0, size=lb.shape)
+    ub[0] = lb[0]  # equalities
+    lb[1, :6] = -np.inf  # upper sides only
+    ub[2, :5] = np.inf  # lower sides only
+    lb[3], ub[3] = -np.inf, np.inf  # no bound
+    c = 2.0 * rng.normal(size=lb.shape)
+    kw = dict(inequality=mode, barrier_mu=0.3, barrier_delta=0.2)
+    fast = AugmentedLagrangian(lb, ub, 10.0, **kw)
+    ref = AugmentedLagrangian(lb, ub, 10.0, compiled=False, **kw)
+    assert fast.compiled and not ref.compiled
+    for al in (fast, ref):  # multipliers and penalties of every kind of row
+        al.update(c + 0.3, 10.0, 1e6)
+        al.update(c, 10.0, 1e6)
+    np.testing.assert_array_equal(fast.rho, ref.rho)
+    value, viol = fast.value_and_violation(c)
+    np.testing.assert_allclose(value, ref.value(c), rtol=1e-13)
+    assert fast.value(c) == value
+    assert viol == ref.violation(c).max() > 0.0
+    for a, b in zip(fast.weights_targets(c), ref.weights_targets(c), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-15)
+    # the kernel reads the multipliers in place: a shift shows at once
+    fast.shift()
+    ref.shift()
+    np.testing.assert_allclose(fast.value(c), ref.value(c), rtol=1e-13)
+    with pytest.raises(ValueError, match="the rows have shape"):
+        fast.set_bounds(lb[:3], ub[:3])

@@ -148,3 +148,27 @@ def test_a_term_switched_by_a_mask_is_active_exactly_there(prb):
     mask[[0, 3]] = True
     cost.set_nodes(mask)
     np.testing.assert_array_equal(cost.nodes, [0, 3])
+
+
+def test_stacked_bounds_and_weights_follow_each_terms_nodes_rows_and_values(prb):
+    from horizon_mpc.problem.terms import stacked_bounds, stacked_weights
+
+    x, u = prb.get_variable("x"), prb.get_variable("u")
+    c1 = prb.create_constraint("c1", x, nodes=[1, 2], bounds=([-1.0, -2.0], [1.0, 2.0]))
+    c2 = prb.create_constraint("c2", u[0], nodes=[0, 5])
+    c2.set_bounds(-3.0, 4.0, nodes=5)
+    lb, ub, act = stacked_bounds([c1, c2])
+    assert lb.shape == ub.shape == act.shape == (3, prb.n_nodes + 1)
+    np.testing.assert_array_equal(lb[:2], c1.lower_bounds)
+    np.testing.assert_array_equal(ub[2], c2.upper_bounds[0])
+    np.testing.assert_array_equal(act[0], c1.active)
+    np.testing.assert_array_equal(act[2], c2.active)
+    assert lb[2, 5] == -3.0 and ub[2, 0] == 0.0
+    k1 = prb.create_cost("k1", x, nodes=[3], weight=[2.0, 5.0])
+    k2 = prb.create_cost("k2", u, weight=7.0)
+    w = stacked_weights([k1, k2])
+    expected = np.zeros((3, prb.n_nodes + 1))
+    expected[0, 3], expected[1, 3] = 2.0, 5.0
+    expected[2, :prb.n_nodes] = 7.0
+    np.testing.assert_array_equal(w, expected)
+    assert stacked_weights([]).shape == (0, 0) and stacked_bounds([])[0].shape == (0, 0)

@@ -16,7 +16,7 @@ import numpy as np
 
 from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, select_nodes
 
-__all__ = ["Constraint", "Cost", "GeneralCost", "Term"]
+__all__ = ["Constraint", "Cost", "GeneralCost", "Term", "stacked_bounds", "stacked_weights"]
 
 
 class Term:
@@ -152,6 +152,30 @@ class GeneralCost(Term):
     """A general scalar cost ``sum_k l(k)`` (only for solvers that take a Hessian: IPOPT)."""
 
     kind = "general cost"
+
+
+def stacked_bounds(constraints: list[Constraint]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of ``constraints`` stacked in order: ``(lb, ub, active)``, each
+    (sum of dims, N+1); ``active`` repeats each term's node mask over its rows. Bounds are
+    returned as they are set, inactive nodes included (one copy of each, no per-term
+    copies: the solvers read this every solve)."""
+    if not constraints:
+        return np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0), bool)
+    dims = [c.dim for c in constraints]
+    active = np.repeat(np.array([c._active for c in constraints]), dims, axis=0)
+    return (np.concatenate([c._lb for c in constraints]),
+            np.concatenate([c._ub for c in constraints]), active)
+
+
+def stacked_weights(costs: list[Cost]) -> np.ndarray:
+    """Weight of each residual row of ``costs`` (stacked in order) per node,
+    (sum of dims, N+1): the cost's weight where it is active, 0 elsewhere."""
+    if not costs:
+        return np.zeros((0, 0))
+    dims = [c.dim for c in costs]
+    active = np.repeat(np.array([c._active for c in costs]), dims, axis=0)
+    return active * np.concatenate([c._weight for c in costs])[:, None]
 
 
 def _ranges(idx: np.ndarray) -> str:

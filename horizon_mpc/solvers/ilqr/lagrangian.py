@@ -27,6 +27,12 @@ import numpy as np
 
 __all__ = ["AugmentedLagrangian", "relaxed_barrier"]
 
+
+def _compiled_available() -> bool:
+    from horizon_mpc.solvers.ilqr import riccati_c  # imports this package's equality module
+
+    return riccati_c.available()
+
 INEQUALITY_MODES = ("lagrangian", "barrier")
 
 
@@ -60,11 +66,14 @@ class AugmentedLagrangian:
         inequality: ``'lagrangian'`` or ``'barrier'`` (see the module docstring).
         barrier_mu, barrier_delta: weight and relaxation slack of the barrier (in the
             units of the rows).
+        compiled: evaluate the rows in one compiled pass (``riccati_c.AlRowsKernel``) when
+            the compiled library is available; numpy otherwise (the same values to
+            rounding).
     """
 
     def __init__(self, lb: np.ndarray, ub: np.ndarray, rho0: float,
                  inequality: str = "lagrangian", barrier_mu: float = 1.0,
-                 barrier_delta: float = 1.0):
+                 barrier_delta: float = 1.0, compiled: bool = True):
         if inequality not in INEQUALITY_MODES:
             raise ValueError(f"inequality must be one of {INEQUALITY_MODES}, got {inequality!r}")
         if not (barrier_mu > 0 and barrier_delta > 0):
@@ -72,16 +81,24 @@ class AugmentedLagrangian:
                              f"{barrier_delta}")
         self.barrier = inequality == "barrier"
         self.mu, self.delta = float(barrier_mu), float(barrier_delta)
-        self.lam = np.zeros_like(lb)
-        self.lam_lo = np.zeros_like(lb)
-        self.lam_up = np.zeros_like(lb)
-        self.rho = np.full_like(lb, rho0)
+        shape = np.shape(lb)
+        self.lam = np.zeros(shape)
+        self.lam_lo = np.zeros(shape)
+        self.lam_up = np.zeros(shape)
+        self.rho = np.full(shape, float(rho0))
         self.rho0 = rho0
+        self.compiled = bool(compiled) and _compiled_available()
+        self._kernel = None
         self.set_bounds(lb, ub)
         self._last_violation = np.full_like(lb, np.inf)
 
     def set_bounds(self, lb: np.ndarray, ub: np.ndarray) -> None:
         """New bounds (a row whose kind changes gets its multipliers reset)."""
+        lb = np.ascontiguousarray(lb, dtype=float)
+        ub = np.ascontiguousarray(ub, dtype=float)
+        if lb.shape != self.lam.shape or ub.shape != self.lam.shape:
+            raise ValueError(f"bounds of shape {lb.shape}, {ub.shape}; the rows have shape "
+                             f"{self.lam.shape}")
         eq = np.isfinite(lb) & (lb == ub)
         if hasattr(self, "eq"):
             changed = (eq != self.eq) | (np.isfinite(lb) != np.isfinite(self.lb)) | (
@@ -90,6 +107,12 @@ class AugmentedLagrangian:
         self.lb, self.ub, self.eq = lb, ub, eq
         self.has_lo = np.isfinite(lb) & ~eq
         self.has_up = np.isfinite(ub) & ~eq
+        self._barrier_memo = None
+        if self.compiled:
+            from horizon_mpc.solvers.ilqr.riccati_c import AlRowsKernel
+
+            self._kernel = AlRowsKernel(lb, ub, self.lam, self.lam_lo, self.lam_up, self.rho)
+            return
         # finite copies (0 where a row has no such bound) for the per-evaluation arithmetic
         self._b = np.where(eq, lb, 0.0)
         self._lo = np.where(self.has_lo, lb, 0.0)
@@ -100,7 +123,6 @@ class AugmentedLagrangian:
         self._bu, self._bl = self.ub.ravel()[self._iu], self.lb.ravel()[self._il]
         self._isides = np.concatenate((self._iu, self._il))
         self._irows = np.flatnonzero(self.has_up | self.has_lo)
-        self._barrier_memo = None
 
     def violation(self, c: np.ndarray) -> np.ndarray:
         """Per-row violation ``max(lb - c, c - ub, 0)``, shape of ``c``."""
@@ -129,6 +151,17 @@ class AugmentedLagrangian:
 
     def value(self, c: np.ndarray) -> float:
         """The augmented-Lagrangian (and barrier) terms summed over rows."""
+        if self._kernel is not None:
+            return self._kernel(c, self.barrier, self.mu, self.delta)[0]
+        return self._value_numpy(c)
+
+    def value_and_violation(self, c: np.ndarray) -> tuple[float, float]:
+        """``(value(c), violation(c).max(initial=0))`` (one pass when compiled)."""
+        if self._kernel is not None:
+            return self._kernel(c, self.barrier, self.mu, self.delta)[:2]
+        return self._value_numpy(c), float(self.violation(c).max(initial=0.0))
+
+    def _value_numpy(self, c: np.ndarray) -> float:
         rho = self.rho
         any_eq, any_up, any_lo = self._any
         total = 0.0
@@ -153,6 +186,9 @@ class AugmentedLagrangian:
 
     def weights_targets(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gauss-Newton weights and targets of the rows at constraint values ``c``."""
+        if self._kernel is not None:
+            _, _, w, t = self._kernel(c, self.barrier, self.mu, self.delta, weights=True)
+            return w, t
         rho = self.rho
         w = np.zeros_like(c)
         t = np.zeros_like(c)

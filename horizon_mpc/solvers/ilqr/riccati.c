@@ -177,6 +177,92 @@ int riccati_project(int N, int m, int nu, int ndx, const double *W, const uint8_
     return project_base(N, m, nu, ndx, W, rows, rtol, P_e, P_x, Z, fr, pinv, ok, unmet);
 }
 
+/*
+ * Augmented-Lagrangian / relaxed-barrier terms of n constraint rows (lagrangian.py's
+ * AugmentedLagrangian.value, .violation and .weights_targets in one pass).
+ *  c, lb, ub, lam, lam_lo, lam_up, rho: n doubles each, C-contiguous (lb == ub finite: an
+ *      equality; an infinite bound: no such side).
+ *  barrier: 1 relaxed log barrier of weight mu and relaxation delta on the inequality sides,
+ *      0 the augmented Lagrangian of lam_lo, lam_up.
+ *  w, t (may be NULL): Gauss-Newton weight and target of each row; viol (may be NULL):
+ *      max(lb - c, c - ub, 0) of each row.
+ *  sums[2]: the summed terms and the largest violation.
+ */
+static void barrier_side(double h, double mu, double delta, double *value, double *d1,
+                         double *d2)
+{
+    if (h > delta) {
+        *value = -mu * log(h / delta);
+        *d1 = -mu / h;
+        *d2 = mu / (h * h);
+    } else {
+        double z = (h - 2.0 * delta) / delta;
+        *value = 0.5 * mu * (z * z - 1.0);
+        *d1 = (mu / delta) * z;
+        *d2 = mu / (delta * delta);
+    }
+}
+
+void riccati_al_rows(int n, const double *c, const double *lb, const double *ub,
+                     const double *lam, const double *lam_lo, const double *lam_up,
+                     const double *rho, int barrier, double mu, double delta, double *w,
+                     double *t, double *viol, double *sums)
+{
+    double total = 0.0, vmax = 0.0;
+    for (int i = 0; i < n; i++) {
+        double ci = c[i], lo = lb[i], up = ub[i], r = rho[i], wi = 0.0, ti = 0.0;
+        double v = lo - ci;
+        if (ci - up > v) v = ci - up;
+        if (!(v > 0.0)) v = 0.0;
+        if (v > vmax) vmax = v;
+        if (viol) viol[i] = v;
+        if (isfinite(lo) && lo == up) {
+            double e = ci - lo;
+            total += lam[i] * e + 0.5 * r * e * e;
+            wi = 0.5 * r;
+            ti = lo - lam[i] / r;
+        } else if (barrier) {
+            double g = 0.0, h = 0.0, b, d1, d2;
+            int any = 0;
+            if (isfinite(up)) {
+                barrier_side(up - ci, mu, delta, &b, &d1, &d2);
+                total += b; g -= d1; h += d2; any = 1;
+            }
+            if (isfinite(lo)) {
+                barrier_side(ci - lo, mu, delta, &b, &d1, &d2);
+                total += b; g += d1; h += d2; any = 1;
+            }
+            if (any) {
+                wi = 0.5 * h;
+                ti = ci - g / h;
+            }
+        } else {
+            int active_up = 0;
+            if (isfinite(up)) {
+                double s = lam_up[i] + r * (ci - up), s0 = s > 0.0 ? s : 0.0;
+                total += (s0 * s0 - lam_up[i] * lam_up[i]) / (2.0 * r);
+                if (s > 0.0) {
+                    active_up = 1;
+                    wi = 0.5 * r;
+                    ti = up - lam_up[i] / r;
+                }
+            }
+            if (isfinite(lo)) {
+                double s = lam_lo[i] + r * (lo - ci), s0 = s > 0.0 ? s : 0.0;
+                total += (s0 * s0 - lam_lo[i] * lam_lo[i]) / (2.0 * r);
+                if (s > 0.0 && !active_up) {
+                    wi = 0.5 * r;
+                    ti = lo + lam_lo[i] / r;
+                }
+            }
+        }
+        if (w) w[i] = wi;
+        if (t) t[i] = ti;
+    }
+    sums[0] = total;
+    sums[1] = vmax;
+}
+
 #else
 /* ================================================================== kernel pass (per ISA) */
 /* Everything below is compiled once per ISA, with VW doubles per vector; ISA(name) gives

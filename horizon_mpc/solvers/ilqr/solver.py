@@ -29,6 +29,7 @@ import numpy as np
 
 from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.problem import Problem
+from horizon_mpc.problem.terms import stacked_bounds, stacked_weights
 from horizon_mpc.solvers.base import Solver
 from horizon_mpc.solvers.ilqr import riccati, riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
@@ -169,28 +170,25 @@ class IlqrSolver(Solver):
             xlb, xub = xlb.copy(), xub.copy()
             xlb[:, 0], xub[:, 0] = -np.inf, np.inf
         # stage rows: constraints, then x bounds, then u bounds
-        lb, ub = np.full((N, m.nc), -np.inf), np.full((N, m.nc), np.inf)
-        i = 0
-        for con in m.stage_cons:
-            act = con.active[:N]
-            if self.x_init is not None and not con.uses_input:
-                act[0] = False  # a fixed initial state cannot be changed: nothing to enforce
-            lb[act, i:i + con.dim] = con.lower_bounds[:, :N].T[act]
-            ub[act, i:i + con.dim] = con.upper_bounds[:, :N].T[act]
-            i += con.dim
-        lb[:, i:i + m.nx], ub[:, i:i + m.nx] = xlb[:, :N].T, xub[:, :N].T
-        i += m.nx
-        lb[:, i:], ub[:, i:] = ulb.T, uub.T
-        lbN, ubN = np.full((1, m.ncN), -np.inf), np.full((1, m.ncN), np.inf)
-        i = 0
-        for con in m.term_cons:
-            if con.active[N]:
-                lbN[0, i:i + con.dim] = con.lower_bounds[:, N]
-                ubN[0, i:i + con.dim] = con.upper_bounds[:, N]
-            i += con.dim
-        lbN[0, i:], ubN[0, i:] = xlb[:, N], xub[:, N]
+        nc, ncN = m.nc_con, m.ncN_con
+        lb, ub = np.empty((N, m.nc)), np.empty((N, m.nc))
+        if nc:
+            clb, cub, act = stacked_bounds(m.stage_cons)  # (nc, N+1)
+            act = act[:, :N]
+            if self.x_init is not None:
+                # a fixed initial state cannot be changed: nothing to enforce at node 0
+                act[~self._uses_input, 0] = False
+            lb[:, :nc] = np.where(act, clb[:, :N], -np.inf).T
+            ub[:, :nc] = np.where(act, cub[:, :N], np.inf).T
+        lb[:, nc:nc + m.nx], ub[:, nc:nc + m.nx] = xlb[:, :N].T, xub[:, :N].T
+        lb[:, nc + m.nx:], ub[:, nc + m.nx:] = ulb.T, uub.T
+        lbN, ubN = np.empty((1, m.ncN)), np.empty((1, m.ncN))
+        if ncN:
+            tlb, tub, tact = stacked_bounds(m.term_cons)
+            lbN[0, :ncN] = np.where(tact[:, N], tlb[:, N], -np.inf)
+            ubN[0, :ncN] = np.where(tact[:, N], tub[:, N], np.inf)
+        lbN[0, ncN:], ubN[0, ncN:] = xlb[:, N], xub[:, N]
         if self.opts["equality"] == "projection":
-            nc, ncN = m.nc_con, m.ncN_con
             self._layout = EqualityLayout.from_bounds(
                 lb[:, :nc], ub[:, :nc], self._uses_input, lbN[0, :ncN], ubN[0, :ncN], m.nu,
                 m.con_reach, m.conN_reach)
@@ -201,8 +199,10 @@ class IlqrSolver(Solver):
         self._al.set_bounds(lb, ub)
         self._alN.set_bounds(lbN, ubN)
         self._choose_quadratisation(lb[:, :m.nc_con], ub[:, :m.nc_con])
-        self.Wr = self._weights(m.stage_costs, N, slice(0, N))  # (N, nr)
-        self.WrN = self._weights(m.term_costs, 1, slice(N, N + 1))  # (1, nrN)
+        self.Wr = stacked_weights(m.stage_costs)[:, :N].T if m.stage_costs else np.zeros(
+            (N, 0))  # (N, nr)
+        self.WrN = stacked_weights(m.term_costs)[:, N:].T if m.term_costs else np.zeros(
+            (1, 0))  # (1, nrN)
 
     def _choose_quadratisation(self, lb: np.ndarray, ub: np.ndarray) -> None:
         """The lean quadratisation (no AL terms for the projected equalities) unless a row it
@@ -218,15 +218,6 @@ class IlqrSolver(Solver):
                      "building the quadratisation with every row")
             self._quadratise_all = BufferedFunction(self.model.quadratise_full())
         self._quadratise_fn = self._quadratise_all
-
-    @staticmethod
-    def _weights(costs, n: int, nodes) -> np.ndarray:
-        """(n, rows) weight of each residual row on ``nodes`` (0 where its cost is off)."""
-        if not costs:
-            return np.zeros((n, 0))
-        active = np.array([c.active[nodes] for c in costs], dtype=float)  # (costs, n)
-        dims = [c.dim for c in costs]
-        return active.T.repeat(dims, axis=1) * np.concatenate([c.weight for c in costs])
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate(self, X: np.ndarray, U: np.ndarray) -> dict[str, Any] | None:
@@ -248,16 +239,16 @@ class IlqrSolver(Solver):
         eq = np.abs(np.where(self._eq_rows, c[:, :m.nc_con] - lay.b, 0.0))
         eqN = np.abs(np.where(lay.term, cN[0, :m.ncN_con] - lay.bN, 0.0))
         abs_gap, abs_d0 = np.abs(gap), np.abs(d0)
+        al, al_viol = self._al.value_and_violation(c)
+        alN, alN_viol = self._alN.value_and_violation(cN)
         return {
             "gap": gap, "r": r, "c": c, "rN": rN, "cN": cN, "d0": d0,
             "eq_l1": float(eq.sum() + eqN.sum()),
             "cost": float(np.vdot(self.Wr, r * r) + np.vdot(self.WrN, rN * rN)),
-            "al": self._al.value(c) + self._alN.value(cN),
+            "al": al + alN,
             "gap_l1": float(abs_gap.sum() + abs_d0.sum()),
             "viol": float(max(abs_gap.max(initial=0.0), abs_d0.max(initial=0.0),
-                              eq.max(initial=0.0), eqN.max(initial=0.0),
-                              self._al.violation(c).max(initial=0.0),
-                              self._alN.violation(cN).max(initial=0.0))),
+                              eq.max(initial=0.0), eqN.max(initial=0.0), al_viol, alN_viol)),
         }
 
     def _merit(self, ev: dict[str, Any], nu: float) -> float:
