@@ -194,6 +194,8 @@ class BufferedFunction:
         tau, dtau_dq, *_ = call(q, v, a, f)  # numpy views, overwritten by the next call
 
     Only dense inputs and outputs are supported (densify the Function otherwise).
+    ``output_buffer`` is one flat array holding every output, in order (e.g. one
+    finiteness test of all of them: ``math.isfinite(call.output_buffer.sum())``).
     """
 
     def __init__(self, fn: ca.Function) -> None:
@@ -208,7 +210,12 @@ class BufferedFunction:
         self._buffer, self._eval = fn.buffer()
         # CasADi is column-major: a Fortran-ordered array's transpose is a C-contiguous view
         self.inputs = [np.zeros(fn.size_in(i), order="F") for i in range(fn.n_in())]
-        self.outputs = [np.zeros(fn.size_out(i), order="F") for i in range(fn.n_out())]
+        # the outputs are consecutive blocks of one array: one reduction covers them all
+        sizes = [fn.numel_out(i) for i in range(fn.n_out())]
+        self.output_buffer = np.zeros(sum(sizes))
+        offsets = np.concatenate(([0], np.cumsum(sizes))).astype(int)
+        self.outputs = [self.output_buffer[offsets[i]:offsets[i + 1]].reshape(
+            fn.size_out(i), order="F") for i in range(fn.n_out())]
         for i, arr in enumerate(self.inputs):
             self._buffer.set_arg(i, memoryview(arr.T))
         for i, arr in enumerate(self.outputs):

@@ -65,14 +65,16 @@ class ContactTerms:
 
     def set_stance(self, stance: np.ndarray) -> None:
         """The node sets of :meth:`set_schedule` only (``stance``: (n_feet, N+1) booleans)."""
+        stance = np.asarray(stance, bool)
+        stage = np.ones(stance.shape[-1], bool)  # node masks: the force terms end at N-1
+        stage[-1] = False
         for i, foot in enumerate(self.velocity):
-            st = np.asarray(stance[i], bool)
-            n_last = st.size - 1
-            self.velocity[foot].set_nodes(np.flatnonzero(st))
-            self.friction[foot].set_nodes(np.flatnonzero(st[:n_last]))
-            self.zero_force[foot].set_nodes(np.flatnonzero(~st[:n_last]))
+            st = stance[i]
+            self.velocity[foot].set_nodes(st)
+            self.friction[foot].set_nodes(st & stage)
+            self.zero_force[foot].set_nodes(~st & stage)
             if foot in self.clearance:
-                self.clearance[foot].set_nodes(np.flatnonzero(~st))
+                self.clearance[foot].set_nodes(~st)
 
     def set_swing_height(self, swing_z: np.ndarray) -> None:
         """World height (m) of each swinging foot per node, (n_feet, N+1); no-op without

@@ -67,6 +67,10 @@ class Term:
 
     def set_nodes(self, nodes: NodeSelection) -> None:
         """Make the term active exactly on ``nodes`` (None: every valid node)."""
+        if (isinstance(nodes, np.ndarray) and nodes.dtype == bool
+                and nodes.shape == self._active.shape and not np.any(nodes & ~self._valid_mask)):
+            np.copyto(self._active, nodes)  # a valid mask (per-tick schedules): no indices
+            return
         idx = self._select(nodes)
         self._active[:] = False
         self._active[idx] = True

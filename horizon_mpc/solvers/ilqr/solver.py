@@ -232,8 +232,8 @@ class IlqrSolver(Solver):
         else:
             d0 = np.zeros(m.ndx)
         # one finiteness test: NaN and inf propagate through the sums (inf - inf is NaN)
-        if not math.isfinite(float(gap.sum() + r.sum() + c.sum() + rN.sum() + cN.sum()
-                                   + d0.sum())):
+        if not math.isfinite(float(self._values.output_buffer.sum())
+                             + float(self._values_term.output_buffer.sum()) + float(d0.sum())):
             return None
         lay = self._layout
         eq = np.abs(np.where(self._eq_rows, c[:, :m.nc_con] - lay.b, 0.0))
@@ -261,8 +261,9 @@ class IlqrSolver(Solver):
         out = self._quadratise_fn(X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T, tc.T)
         out_term = self._quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
                                          tcN.T)
-        # one finiteness test on the contiguous outputs (NaN and inf propagate through sums)
-        if not math.isfinite(sum(float(a.sum()) for a in (*out, *out_term))):
+        # one finiteness test on the outputs (NaN and inf propagate through sums)
+        if not math.isfinite(float(self._quadratise_fn.output_buffer.sum())
+                             + float(self._quadratise_term.output_buffer.sum())):
             return None
         A, B, lx, lu, lxx, luu, lux, cx, cu = out
         lxN, lxxN, cxN = out_term
