@@ -592,3 +592,19 @@ def test_the_executable_freezes_what_startup_allocated_out_of_the_collector(monk
         assert gc.get_freeze_count() > 0
     finally:
         gc.unfreeze()
+
+
+def test_the_diagnostics_message_is_refilled_with_each_ticks_values_and_keys():
+    from horizon_mpc.nodes.mpc_outputs import DiagnosticsMessage
+
+    diag = DiagnosticsMessage("mpc", "go2")
+    first = diag.filled(1_500_000_000, b"\x00", "ok", {"a": 1, "b": [1.5, 2]})
+    kvs = list(first.status[0].values)
+    second = diag.filled(2_000_000_001, b"\x01", "solver: rti", {"a": 3.25, "b": "x"})
+    status = second.status[0]
+    assert [(kv.key, kv.value) for kv in status.values] == [("a", "3.25"), ("b", "x")]
+    assert all(a is b for a, b in zip(kvs, status.values, strict=True))  # refilled in place
+    assert (second.header.stamp.sec, second.header.stamp.nanosec) == (2, 1)
+    assert status.level == b"\x01" and status.message == "solver: rti"
+    third = diag.filled(3, b"\x00", "ok", {"a": 0, "c": None})  # other keys: new pairs
+    assert [(kv.key, kv.value) for kv in third.status[0].values] == [("a", "0"), ("c", "None")]

@@ -355,10 +355,12 @@ class WalkingMpc:
 
     def _ramp_command(self, cmd: np.ndarray, dt: float) -> None:
         st = self.settings
-        vmax = np.asarray(st.max_velocity, float)
-        target = np.clip(np.nan_to_num(cmd, nan=0.0, posinf=0.0, neginf=0.0), -vmax, vmax)
-        step = np.asarray(st.max_acceleration, float) * dt
-        self.cmd += np.clip(target - self.cmd, -step, step)
+        # three numbers: plain floats (numpy's per-call overhead was ~50 us a tick here)
+        for i, (c, vmax, amax) in enumerate(zip(cmd.tolist(), st.max_velocity,
+                                                 st.max_acceleration, strict=True)):
+            target = min(max(c, -vmax), vmax) if math.isfinite(c) else 0.0
+            step = amax * dt
+            self.cmd[i] += min(max(target - self.cmd[i], -step), step)
 
     def _advance_pose_ref(self, q: np.ndarray, dt: float) -> None:
         x, y, yaw = self.pose_ref

@@ -69,7 +69,9 @@ def fill_path(msg: Path, plan: Plan, stamp_ns: int, frame_id: str = "odom") -> P
 
 
 class DiagnosticsMessage:
-    """One DiagnosticArray with one status (``name``, ``hardware_id``), refilled in place."""
+    """One DiagnosticArray with one status (``name``, ``hardware_id``), refilled in place
+    (its KeyValues too while the keys stay the same): copy it to keep it past the next
+    :meth:`filled`."""
 
     def __init__(self, name: str, hardware_id: str) -> None:
         self.status = DiagnosticStatus(name=name, hardware_id=hardware_id)
@@ -80,7 +82,15 @@ class DiagnosticsMessage:
         """The message with this stamp, level, message and ``str()`` of each value."""
         set_stamp(self.msg.header.stamp, stamp_ns)
         self.status.level, self.status.message = level, message
-        self.status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        kvs = self.status.values
+        if len(kvs) == len(values) and all(kv.key == k for kv, k in zip(kvs, values,
+                                                                         strict=True)):
+            # the same keys as last time (every tick): refill the values in place (building
+            # ~16 KeyValue messages anew costs ~0.2 ms a tick)
+            for kv, v in zip(kvs, values.values(), strict=True):
+                kv.value = str(v)
+        else:
+            self.status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         return self.msg
 
 
