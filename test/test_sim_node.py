@@ -156,11 +156,21 @@ def test_odometry_twist_is_in_the_base_frame(harness_factory):
 
 
 def test_free_running_publishes_at_the_state_rate(harness_factory):
+    """Every state the node publishes is 2 ms of sim time after the previous one (500 Hz),
+    none skipped. Checked where it is published: running free, the node can publish faster
+    than DDS delivers to a subscriber in a loaded process (its keep-last queues then drop
+    some; seen once in CI), so the subscriber's copies are only checked to be among them."""
     h = harness_factory(realtime_factor=0.0, state_rate=500.0)
-    h.spin_until(lambda: len(h.joint_states) >= 20 and len(h.clocks) >= 20)
-    stamps = [time_to_ns(m.header.stamp) for m in h.joint_states]
-    assert np.all(np.diff(stamps) == 2_000_000)  # ns: 500 Hz of sim time, none lost
-    assert h.sim.now_ns >= stamps[-1]
+    published: list[int] = []
+    pub = h.sim._pub_joints
+    send = pub.publish
+    pub.publish = lambda msg: (published.append(time_to_ns(msg.header.stamp)), send(msg))[1]
+    h.spin_until(lambda: len(published) >= 20 and len(h.joint_states) >= 20
+                 and len(h.clocks) >= 20)
+    assert np.all(np.diff(published) == 2_000_000)  # ns: 500 Hz of sim time, none skipped
+    received = [time_to_ns(m.header.stamp) for m in h.joint_states]
+    assert set(received) <= set(published) and np.all(np.diff(received) > 0)
+    assert h.sim.now_ns >= published[-1]
 
 
 def controller(h: Harness) -> Callable[[JointState], None]:
