@@ -196,7 +196,7 @@ class WalkingMpc:
                 return plan
         q = self._clean_q(q)
         dt_tick = max(t - self.t_last, 0.0)
-        self._ramp_command(np.zeros(3) if cmd is None else np.asarray(cmd, float), dt_tick)
+        self._ramp_command(cmd, dt_tick)
         self._shift(dt_tick, q)
         self._advance_pose_ref(q, dt_tick)
         self.t_last = t
@@ -227,11 +227,10 @@ class WalkingMpc:
         if self.t_last is None:
             raise RuntimeError("prepare() needs a started controller (start() or update())")
         dt_tick = max(t_next - self.t_last, 0.0)
-        self._ramp_command(np.zeros(3) if cmd is None else np.asarray(cmd, float), dt_tick)
-        X0 = self.wp.prb.stacked("state")[:, 0]
-        self._shift(dt_tick, X0[:self.model.nq])
-        X0 = self.wp.prb.stacked("state")[:, 0].copy()  # the plan's state at t_next
-        q_pred, v_pred = X0[:self.model.nq], X0[self.model.nq:]
+        self._ramp_command(cmd, dt_tick)
+        self._shift(dt_tick, self.wp.q.initial_guess[:, 0])
+        # the plan's state at t_next
+        q_pred, v_pred = self.wp.q.initial_guess[:, 0], self.wp.v.initial_guess[:, 0]
         self._advance_pose_ref(q_pred, dt_tick)
         self.t_last = t_next
         self._command_gait(t_next, cmd)
@@ -353,10 +352,13 @@ class WalkingMpc:
         self.wp.standing_guess(q)
         self.solver.reset_multipliers()
 
-    def _ramp_command(self, cmd: np.ndarray, dt: float) -> None:
+    def _ramp_command(self, cmd: np.ndarray | None, dt: float) -> None:
+        """Move the ramped command toward ``cmd`` (None: zero; NaN/inf: zero), clamped to
+        the velocity limits, by at most the acceleration limits times ``dt``."""
         st = self.settings
+        cmd = [0.0, 0.0, 0.0] if cmd is None else np.asarray(cmd, float).tolist()
         # three numbers: plain floats (numpy's per-call overhead was ~50 us a tick here)
-        for i, (c, vmax, amax) in enumerate(zip(cmd.tolist(), st.max_velocity,
+        for i, (c, vmax, amax) in enumerate(zip(cmd, st.max_velocity,
                                                  st.max_acceleration, strict=True)):
             target = min(max(c, -vmax), vmax) if math.isfinite(c) else 0.0
             step = amax * dt

@@ -53,27 +53,31 @@ class Term:
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r}, dim={self.dim}, nodes={self.nodes.tolist()})"
 
-    def _select(self, nodes: NodeSelection) -> np.ndarray:
+    def _select_mask(self, nodes: NodeSelection) -> np.ndarray:
+        """The (N+1,) boolean mask of ``nodes``, validated against the term's valid nodes.
+
+        A boolean mask of one entry per node is taken as it is (the per-tick schedules pass
+        those: no index arrays built); every other selection goes through ``select_nodes``.
+        """
         if nodes is None:
-            return self.valid_nodes.copy()
-        idx = select_nodes(nodes, self.n_nodes + 1, f"{self.kind} {self.name!r}")
-        invalid = idx[~self._valid_mask[idx]]
-        if invalid.size:
+            return self._valid_mask.copy()
+        if (isinstance(nodes, np.ndarray) and nodes.dtype == bool
+                and nodes.shape == self._active.shape):
+            mask = nodes
+        else:
+            mask = np.zeros_like(self._active)
+            mask[select_nodes(nodes, self.n_nodes + 1, f"{self.kind} {self.name!r}")] = True
+        if np.any(mask & ~self._valid_mask):
+            invalid = np.flatnonzero(mask & ~self._valid_mask)
             raise IndexError(
                 f"{self.kind} {self.name!r} cannot be evaluated on nodes {invalid.tolist()} "
                 f"(it uses {'inputs or ' if self.uses_input else ''}offset variables); "
                 f"valid nodes: {_ranges(self.valid_nodes)}")
-        return idx
+        return mask
 
     def set_nodes(self, nodes: NodeSelection) -> None:
         """Make the term active exactly on ``nodes`` (None: every valid node)."""
-        if (isinstance(nodes, np.ndarray) and nodes.dtype == bool
-                and nodes.shape == self._active.shape and not np.any(nodes & ~self._valid_mask)):
-            np.copyto(self._active, nodes)  # a valid mask (per-tick schedules): no indices
-            return
-        idx = self._select(nodes)
-        self._active[:] = False
-        self._active[idx] = True
+        np.copyto(self._active, self._select_mask(nodes))
 
     @property
     def nodes(self) -> np.ndarray:
@@ -166,10 +170,8 @@ def stacked_bounds(constraints: list[Constraint]
     copies: the solvers read this every solve)."""
     if not constraints:
         return np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0), bool)
-    dims = [c.dim for c in constraints]
-    active = np.repeat(np.array([c._active for c in constraints]), dims, axis=0)
     return (np.concatenate([c._lb for c in constraints]),
-            np.concatenate([c._ub for c in constraints]), active)
+            np.concatenate([c._ub for c in constraints]), _stacked_active(constraints))
 
 
 def stacked_weights(costs: list[Cost]) -> np.ndarray:
@@ -177,9 +179,12 @@ def stacked_weights(costs: list[Cost]) -> np.ndarray:
     (sum of dims, N+1): the cost's weight where it is active, 0 elsewhere."""
     if not costs:
         return np.zeros((0, 0))
-    dims = [c.dim for c in costs]
-    active = np.repeat(np.array([c._active for c in costs]), dims, axis=0)
-    return active * np.concatenate([c._weight for c in costs])[:, None]
+    return _stacked_active(costs) * np.concatenate([c._weight for c in costs])[:, None]
+
+
+def _stacked_active(terms: list[Term]) -> np.ndarray:
+    """Each term's (N+1,) node mask repeated over its rows: (sum of dims, N+1)."""
+    return np.repeat(np.array([t._active for t in terms]), [t.dim for t in terms], axis=0)
 
 
 def _ranges(idx: np.ndarray) -> str:

@@ -28,12 +28,15 @@ import numpy as np
 __all__ = ["AugmentedLagrangian", "relaxed_barrier"]
 
 
-def _compiled_available() -> bool:
+INEQUALITY_MODES = ("lagrangian", "barrier")
+
+
+def _kernel(lb, ub, lam, lam_lo, lam_up, rho):
+    """The compiled rows (``riccati_c.AlRowsKernel``), or None without the library."""
     from horizon_mpc.solvers.ilqr import riccati_c  # imports this package's equality module
 
-    return riccati_c.available()
-
-INEQUALITY_MODES = ("lagrangian", "barrier")
+    return riccati_c.AlRowsKernel(lb, ub, lam, lam_lo, lam_up, rho) if riccati_c.available(
+    ) else None
 
 
 def relaxed_barrier(h: np.ndarray, mu: float, delta: float
@@ -87,9 +90,11 @@ class AugmentedLagrangian:
         self.lam_up = np.zeros(shape)
         self.rho = np.full(shape, float(rho0))
         self.rho0 = rho0
-        self.compiled = bool(compiled) and _compiled_available()
         self._kernel = None
         self.set_bounds(lb, ub)
+        if compiled:  # bound once: it reads bounds, multipliers and penalties in place
+            self._kernel = _kernel(self.lb, self.ub, self.lam, self.lam_lo, self.lam_up,
+                                   self.rho)
         self._last_violation = np.full_like(lb, np.inf)
 
     def set_bounds(self, lb: np.ndarray, ub: np.ndarray) -> None:
@@ -108,10 +113,8 @@ class AugmentedLagrangian:
         self.has_lo = np.isfinite(lb) & ~eq
         self.has_up = np.isfinite(ub) & ~eq
         self._barrier_memo = None
-        if self.compiled:
-            from horizon_mpc.solvers.ilqr.riccati_c import AlRowsKernel
-
-            self._kernel = AlRowsKernel(lb, ub, self.lam, self.lam_lo, self.lam_up, self.rho)
+        if self._kernel is not None:
+            self._kernel.set_bounds(lb, ub)
             return
         # finite copies (0 where a row has no such bound) for the per-evaluation arithmetic
         self._b = np.where(eq, lb, 0.0)
@@ -148,6 +151,11 @@ class AugmentedLagrangian:
             a.setflags(write=False)
         self._barrier_memo = (c.copy(), (self.mu, self.delta), (value, d1, d2))
         return value, d1, d2
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the rows are evaluated by the compiled kernel (else numpy)."""
+        return self._kernel is not None
 
     def value(self, c: np.ndarray) -> float:
         """The augmented-Lagrangian (and barrier) terms summed over rows."""

@@ -381,7 +381,8 @@ class AlRowsKernel:
 
     Bound to the arrays of the rows (``lb``, ``ub``, ``lam``, ``lam_lo``, ``lam_up``,
     ``rho``: C-contiguous float64 of one shape); they are read in place at every call, so
-    they must stay the same objects (update them in place). Rebind with new bounds.
+    they must stay the same objects (update them in place); new bounds through
+    :meth:`set_bounds`.
 
     Raises:
         RuntimeError: the compiled library is not available (see :func:`available`).
@@ -391,18 +392,26 @@ class AlRowsKernel:
     def __init__(self, lb: np.ndarray, ub: np.ndarray, lam: np.ndarray, lam_lo: np.ndarray,
                  lam_up: np.ndarray, rho: np.ndarray):
         self._lib = _load()
-        arrays = (lb, ub, lam, lam_lo, lam_up, rho)
-        for a in arrays:
-            if (type(a) is not np.ndarray or a.dtype != np.float64 or a.shape != lb.shape
-                    or not a.flags.c_contiguous):
-                raise ValueError("AlRowsKernel: the row arrays must be C-contiguous float64 of "
-                                 f"one shape ({lb.shape})")
         self.shape = lb.shape
         self.n = int(lb.size)
-        self._arrays = arrays  # kept alive: the pointers below are into them
-        self._ptrs = tuple(a.ctypes.data for a in arrays)
+        self._multipliers = self._checked(lam, lam_lo, lam_up, rho)  # kept alive: pointers
+        self._multiplier_ptrs = tuple(a.ctypes.data for a in self._multipliers)
         self._sums = np.zeros(2)
         self._sums_ptr = self._sums.ctypes.data
+        self.set_bounds(lb, ub)
+
+    def _checked(self, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+        for a in arrays:
+            if (type(a) is not np.ndarray or a.dtype != np.float64 or a.shape != self.shape
+                    or not a.flags.c_contiguous):
+                raise ValueError("AlRowsKernel: the row arrays must be C-contiguous float64 of "
+                                 f"one shape ({self.shape})")
+        return arrays
+
+    def set_bounds(self, lb: np.ndarray, ub: np.ndarray) -> None:
+        """Read these bounds from now on (same rules as the constructor's arrays)."""
+        self._bounds = self._checked(lb, ub)  # kept alive: pointers
+        self._ptrs = (lb.ctypes.data, ub.ctypes.data, *self._multiplier_ptrs)
 
     def __call__(self, c: np.ndarray, barrier: bool, mu: float, delta: float,
                  weights: bool = False) -> tuple[float, float, np.ndarray | None,

@@ -322,7 +322,7 @@ class IlqrSolver(Solver):
     def _iterate(self, ev: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:
         """One ILQR iteration from (self.X, self.U) with its evaluation ``ev``."""
         m = self.model
-        info = {"mu": self.mu, "alpha": 0.0, "accepted": 0.0}
+        info = self._new_info()
         lq = self._lq_step(ev, info)
         if lq is None:
             return ev, info
@@ -405,6 +405,21 @@ class IlqrSolver(Solver):
     def _time(self, phase: str, seconds: float) -> None:
         self.timings[phase] = self.timings.get(phase, 0.0) + seconds
 
+    def _new_info(self) -> dict[str, float]:
+        """An iteration's info before its step (no step taken yet)."""
+        return {"mu": self.mu, "alpha": 0.0, "accepted": 0.0}
+
+    @staticmethod
+    def _record(it: int, ev: dict[str, Any], info: dict[str, float]) -> dict[str, float]:
+        """The history entry (and callback argument) of iteration ``it``."""
+        return {"iter": it, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
+                "violation": ev["viol"], **info}
+
+    def _rti_success(self, ev: dict[str, Any]) -> bool:
+        """The real-time criterion: finite cost, violation within max(tol_constraint, 1e-3)."""
+        return bool(ev["viol"] <= max(self.opts["tol_constraint"], 1e-3)
+                    and np.isfinite(ev["cost"]))
+
     def _solve(self) -> bool:
         o = self.opts
         t_start = time.perf_counter()
@@ -440,8 +455,7 @@ class IlqrSolver(Solver):
                 inner = 0
                 if not rti or o["rti_multiplier_update"]:
                     self._update_multipliers(ev, 1.0 if rti else o["rho_factor"])
-            rec = {"iter": it, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
-                   "violation": ev["viol"], **info}
+            rec = self._record(it, ev, info)
             history.append(rec)
             if o["callback"] is not None:
                 o["callback"](rec)
@@ -467,7 +481,7 @@ class IlqrSolver(Solver):
             t_iter = now
         if rti:
             status = "rti" if status != "time budget" else status
-            converged = ev["viol"] <= max(o["tol_constraint"], 1e-3) and np.isfinite(ev["cost"])
+            converged = self._rti_success(ev)
         self.stats.iterations = it
         self.stats.status = status
         self.stats.success = bool(converged)
@@ -501,7 +515,7 @@ class IlqrSolver(Solver):
         if ev is None:
             self.stats.status = "prepare: warm start not finite"
             return False
-        info = {"mu": self.mu, "alpha": 0.0, "accepted": 0.0}
+        info = self._new_info()
         lq = self._lq_step(ev, info)
         self._time("prepare", time.perf_counter() - t_start)
         if lq is None:
@@ -551,11 +565,8 @@ class IlqrSolver(Solver):
                   viol=max(ev["viol"], float(np.max(np.abs(dx0)))))
         ev, info = self._step(ev, q, proj, bw, dx0, info)
         self._update_multipliers(ev, 1.0)
-        rec = {"iter": 1, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
-               "violation": ev["viol"], **info}
-        st.iterations, st.history, st.status = 1, [rec], "feedback"
-        st.success = ev["viol"] <= max(self.opts["tol_constraint"], 1e-3) and bool(
-            np.isfinite(ev["cost"]))
+        st.iterations, st.history, st.status = 1, [self._record(1, ev, info)], "feedback"
+        st.success = self._rti_success(ev)
         self._publish(ev)
         if self.opts["warm_start"]:
             self._write_back()
