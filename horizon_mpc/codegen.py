@@ -1,7 +1,8 @@
 """Compile any ``casadi.Function`` to C, with an on-disk cache shared by all processes.
 
 ``compile_function(fn)`` generates C for ``fn`` (``casadi.CodeGenerator``), builds a shared
-library with ``gcc -shared -fPIC`` and loads it with ``casadi.external``. The result has the
+library with ``gcc -shared -fPIC`` (optimisation by size of the C, ``-march`` from
+:func:`arch_flags`) and loads it with ``casadi.external``. The result has the
 same name, inputs and outputs as ``fn`` and returns the same numbers. It evaluates numerically
 and on MX, not on SX (an external function has no SX graph), and it has no derivatives:
 compile the derivative Function you need (e.g. a Jacobian) rather than differentiating it.
@@ -20,6 +21,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import platform
 import re
 import shutil
 import subprocess
@@ -35,6 +37,7 @@ __all__ = [
     "STATS",
     "BufferedFunction",
     "CompileStats",
+    "arch_flags",
     "codegen_enabled",
     "compile_function",
     "default_cache_dir",
@@ -50,8 +53,16 @@ CC = os.environ.get("CC", "gcc")
 # compiles in 10 s against 24 s for -O3 and runs within 5% of it (doc/benchmarks.md).
 _OPT_BY_SIZE = ((150_000, "-O3"),)
 _OPT_LARGE = "-O1"
+# Added to -O1, the passes of -O2 that pay on straight-line arithmetic (the FMA contraction
+# is part of -fexpensive-optimizations): go2's walking quadratisation (1.9 MB of C) runs
+# 47 % faster with them and x86-64-v3 (191 against 364 us) and compiles in ~18 s instead of
+# ~12 s (-O2: ~50 s for the same speed); doc/benchmarks.md, session 8.
+_OPT_LARGE_EXTRA = ("-fstrict-aliasing", "-fexpensive-optimizations", "-ftree-slp-vectorize")
 _FLAGS = ("-shared", "-fPIC")
-_POLICY = f"{_OPT_BY_SIZE}|{_OPT_LARGE}|{_FLAGS}|v1"
+_POLICY = f"{_OPT_BY_SIZE}|{_OPT_LARGE}|{_OPT_LARGE_EXTRA}|{_FLAGS}|v2"
+# x86-64-v3 (AVX2, FMA, BMI1/2, F16C, LZCNT, MOVBE): the CPU features /proc/cpuinfo names
+_X86_64_V3 = frozenset({"avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "abm", "movbe", "xsave"})
+_ARCH_MEMO: dict[tuple[str, str], tuple[str, ...]] = {}
 
 
 @dataclass
@@ -88,11 +99,52 @@ def function_name(text: str) -> str:
     return out if out[:1].isalpha() else "f_" + out
 
 
-def _opt_flag(c_size: int) -> str:
+def _opt_flags(c_size: int) -> tuple[str, ...]:
     for limit, flag in _OPT_BY_SIZE:
         if c_size < limit:
-            return flag
-    return _OPT_LARGE
+            return (flag,)
+    return (_OPT_LARGE, *_OPT_LARGE_EXTRA)
+
+
+def _cpu_flags() -> frozenset[str]:
+    """The CPU feature flags of /proc/cpuinfo (empty where there is no such file)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return frozenset()
+    for line in text.splitlines():
+        if line.startswith("flags"):
+            return frozenset(line.partition(":")[2].split())
+    return frozenset()
+
+
+def _compiler_accepts(flag: str) -> bool:
+    res = subprocess.run([CC, flag, "-x", "c", "-fsyntax-only", "-"], input="",
+                         capture_output=True, text=True, check=False)
+    return res.returncode == 0
+
+
+def arch_flags() -> tuple[str, ...]:
+    """The ``-march`` of generated code: ``$HORIZON_MPC_CODEGEN_MARCH`` when set (a gcc
+    ``-march`` value such as ``native``, or ``none`` for the compiler's baseline), else
+    ``x86-64-v3`` on an x86-64 CPU with all its features and a compiler that knows it,
+    else none. Part of every library's cache key: a cache shared by different CPUs keeps
+    one build per target, and a CPU never loads code it cannot run."""
+    choice = os.environ.get("HORIZON_MPC_CODEGEN_MARCH", "auto").strip() or "auto"
+    memo = _ARCH_MEMO.get((choice, CC))
+    if memo is not None:
+        return memo
+    if choice == "none":
+        flags: tuple[str, ...] = ()
+    elif choice != "auto":
+        flags = (f"-march={choice}",)
+    elif (platform.machine() in ("x86_64", "AMD64") and _X86_64_V3 <= _cpu_flags()
+          and shutil.which(CC) and _compiler_accepts("-march=x86-64-v3")):
+        flags = ("-march=x86-64-v3",)
+    else:
+        flags = ()
+    _ARCH_MEMO[(choice, CC)] = flags
+    return flags
 
 
 def _renamed(fn: ca.Function, name: str) -> ca.Function:
@@ -107,7 +159,7 @@ def _renamed(fn: ca.Function, name: str) -> ca.Function:
 
 def _key(fn: ca.Function) -> str:
     h = hashlib.sha256()
-    for part in (fn.serialize(), _POLICY, CC, ca.__version__):
+    for part in (fn.serialize(), _POLICY, " ".join(arch_flags()), CC, ca.__version__):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()[:24]
@@ -163,11 +215,11 @@ def _build(fn: ca.Function, lib: Path) -> None:
         gen.generate(str(work) + os.sep)
         c_file = work / c_name
         size = c_file.stat().st_size
-        opt = _opt_flag(size)
-        _log.info("compiling %s (%d kB of C, %s)...", fn.name(), size // 1000, opt)
+        opt = (*_opt_flags(size), *arch_flags())
+        _log.info("compiling %s (%d kB of C, %s)...", fn.name(), size // 1000, " ".join(opt))
         start = time.perf_counter()
         tmp_lib = work / lib.name
-        cmd = [CC, opt, *_FLAGS, str(c_file), "-o", str(tmp_lib), "-lm"]
+        cmd = [CC, *opt, *_FLAGS, str(c_file), "-o", str(tmp_lib), "-lm"]
         res = subprocess.run(cmd, capture_output=True, text=True, check=False)
         if res.returncode != 0:
             raise RuntimeError(

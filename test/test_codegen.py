@@ -177,3 +177,45 @@ def test_names_that_are_not_c_identifiers_are_sanitised(cache):
     fast = codegen.compile_function(ca.Function("f", [x], [2 * x]), name="fk_FL-foot.0")
     assert fast.name() == "fk_FL_foot_0"
     assert float(fast(1.5)) == 3.0
+
+
+@pytest.fixture
+def fresh_arch(monkeypatch):
+    """arch_flags() without the memo of earlier calls."""
+    monkeypatch.setattr(codegen, "_ARCH_MEMO", {})
+    monkeypatch.delenv("HORIZON_MPC_CODEGEN_MARCH", raising=False)
+
+
+def test_arch_flags_follow_the_override_then_the_cpu(fresh_arch, monkeypatch):
+    v3 = set(codegen._X86_64_V3)
+    monkeypatch.setattr(codegen.platform, "machine", lambda: "x86_64")
+    monkeypatch.setattr(codegen, "_compiler_accepts", lambda flag: True)
+    monkeypatch.setattr(codegen, "_cpu_flags", lambda: frozenset(v3 | {"sse2"}))
+    assert codegen.arch_flags() == ("-march=x86-64-v3",)
+    monkeypatch.setattr(codegen, "_ARCH_MEMO", {})
+    monkeypatch.setattr(codegen, "_cpu_flags", lambda: frozenset(v3 - {"fma"}))
+    assert codegen.arch_flags() == ()  # a CPU without FMA gets baseline code
+    monkeypatch.setattr(codegen, "_ARCH_MEMO", {})
+    monkeypatch.setattr(codegen, "_cpu_flags", lambda: frozenset(v3))
+    monkeypatch.setattr(codegen, "_compiler_accepts", lambda flag: False)
+    assert codegen.arch_flags() == ()  # a compiler that does not know x86-64-v3
+    monkeypatch.setenv("HORIZON_MPC_CODEGEN_MARCH", "none")
+    assert codegen.arch_flags() == ()
+    monkeypatch.setenv("HORIZON_MPC_CODEGEN_MARCH", "native")
+    assert codegen.arch_flags() == ("-march=native",)
+
+
+def test_each_target_gets_its_own_library(cache, fresh_arch, monkeypatch):
+    """The -march is part of the cache key: switching it compiles again, and both builds
+    return the same numbers."""
+    if not codegen._compiler_accepts("-march=native"):
+        pytest.skip(f"{codegen.CC} does not take -march=native")
+    fn = _small_function()
+    monkeypatch.setenv("HORIZON_MPC_CODEGEN_MARCH", "none")
+    plain = codegen.compile_function(fn)
+    monkeypatch.setenv("HORIZON_MPC_CODEGEN_MARCH", "native")
+    native = codegen.compile_function(fn)
+    assert len(list(cache.glob("small_*.so"))) == 2
+    args = [np.array([0.1, -0.4, 2.0]), 1.5]
+    for a, b in zip(plain.call(args), native.call(args), strict=True):
+        np.testing.assert_allclose(a.full(), b.full(), rtol=1e-14)

@@ -321,3 +321,69 @@ def test_projection_kernel_matches_the_numpy_qr(isa):
     proj = Z @ np.swapaxes(Z, 1, 2)
     np.testing.assert_allclose(proj[good], (ref.Z @ np.swapaxes(ref.Z, 1, 2))[good], atol=1e-12)
     np.testing.assert_array_equal(Z[0], np.eye(nu))
+
+
+def _stack_problem(N, ndx, nu, n_in, n_state, n_term, seed):
+    """Random rows for ``equality._stack_rows``: input rows at some nodes, state rows of
+    node k+1 at others (none at every third node), ``n_term`` terminal rows."""
+    rng = np.random.default_rng(seed)
+    nc = n_in + n_state
+    own = np.zeros((N, nc), bool)
+    nxt = np.zeros((N, nc), bool)
+    own[:, :n_in] = rng.random((N, n_in)) < 0.6
+    nxt[:-1, n_in:] = rng.random((N - 1, n_state)) < 0.6
+    own[:-1:3] = nxt[:-1:3] = False
+    layout = EqualityLayout(own, nxt, rng.random(n_term) < 0.7,
+                            rng.standard_normal((N, nc)), rng.standard_normal(n_term))
+    args = [rng.standard_normal((N, nc)), rng.standard_normal((N, nc, ndx)),
+            rng.standard_normal((N, nc, nu)), rng.standard_normal(n_term),
+            rng.standard_normal((n_term, ndx)), rng.standard_normal((N, ndx, ndx)),
+            rng.standard_normal((N, ndx, nu)), rng.standard_normal((N, ndx))]
+    return layout, args
+
+
+@pytest.mark.parametrize("N, ndx, nu, n_in, n_state, n_term", [
+    (12, 7, 5, 3, 2, 2), (1, 4, 3, 2, 1, 2), (5, 6, 4, 0, 3, 1), (5, 6, 4, 3, 0, 0),
+    (6, 36, 30, 18, 12, 6)])
+@pytest.mark.parametrize("sparse", [False, True])
+def test_row_stacking_matches_numpy(compiled, N, ndx, nu, n_in, n_state, n_term, sparse):
+    """``stack_rows_c`` = ``equality._stack_rows`` (the rows, their mask, the scratch row),
+    from C-ordered arrays and from the solver's column-major views, with A and B read
+    densely or by a pattern whose other entries are NaN (so never read)."""
+    from horizon_mpc.solvers.ilqr import equality
+
+    layout, args = _stack_problem(N, ndx, nu, n_in, n_state, n_term, seed=N + ndx)
+    pattern = None
+    if sparse:
+        rng = np.random.default_rng(5)
+        mask = rng.random((ndx, ndx + nu)) < 0.2
+        pattern = riccati_c.AbPattern.from_mask(mask)
+        args[5] = np.where(mask[:, :ndx], args[5], 0.0)
+        args[6] = np.where(mask[:, ndx:], args[6], 0.0)
+    W_ref, rows_ref = equality._stack_rows(layout, *args)
+    if sparse:  # entries outside the pattern must not be read
+        args[5] = np.where(mask[:, :ndx], args[5], np.nan)
+        args[6] = np.where(mask[:, ndx:], args[6], np.nan)
+    for views in (args, _column_major_views(args)):
+        W, rows = riccati_c.stack_rows_c(layout, *views, pattern=pattern)
+        np.testing.assert_array_equal(rows, rows_ref)
+        assert W.shape == W_ref.shape and np.all(W[-1] == 0.0)
+        # slots without a row: zero in C, what the unused row evaluates to in numpy
+        used = np.append(rows.ravel(), True)
+        scale = max(float(np.max(np.abs(W_ref))), 1.0)
+        assert np.max(np.abs(W[used] - W_ref[used]), initial=0.0) <= 1e-13 * scale
+
+
+def test_projection_with_compiled_stacking_matches_the_numpy_path(compiled, monkeypatch):
+    """``project`` through the compiled stacking and QR = the all-numpy path."""
+    from horizon_mpc.solvers.ilqr import equality
+
+    layout, args = _stack_problem(10, 8, 6, 3, 2, 2, seed=3)
+    got = project(layout, *args)
+    monkeypatch.setattr(equality, "_compiled", lambda: False)
+    want = project(layout, *args)
+    np.testing.assert_array_equal(got.rows, want.rows)
+    assert got.rank_deficient == want.rank_deficient
+    for name in ("P_e", "P_x", "pinv", "free"):
+        np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=1e-9,
+                                   atol=1e-11, err_msg=name)

@@ -124,7 +124,8 @@ _METHODS = ("qr", "qr-numpy", "svd")
 
 def project(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarray,
             cN: np.ndarray, cxN: np.ndarray, A: np.ndarray, B: np.ndarray,
-            gap: np.ndarray, rtol: float = 1e-9, method: str = "qr") -> Projection:
+            gap: np.ndarray, rtol: float = 1e-9, method: str = "qr",
+            pattern: object | None = None) -> Projection:
     """Linearised equality rows of every node and their null-space parametrisation.
 
     Args:
@@ -141,6 +142,9 @@ def project(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarra
             at every node (the reference; 2.3x slower in the go2 walking MPC, 3x on warm
             caches). Both give the same P_e, P_x, pinv, free and rank_deficient, to
             rounding, and orthonormal bases Z of the same null spaces.
+        pattern: the structural nonzeros of [A | B] (a :class:`.riccati_c.AbPattern`, the
+            backward pass's), read by the compiled row stacking of ``'qr'`` (its other
+            entries of A and B are not read); None: dense.
 
     Returns:
         The :class:`Projection` (``pinv`` may be a transposed view).
@@ -148,7 +152,13 @@ def project(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarra
     if method not in _METHODS:
         raise ValueError(f"project: unknown method {method!r}; expected one of {_METHODS}")
     n, ndx, nu = B.shape
-    W_flat, rows = _stack_rows(layout, c, cx, cu, cN, cxN, A, B, gap)
+    compiled = method == "qr" and _compiled()
+    if compiled:
+        from horizon_mpc.solvers.ilqr import riccati_c
+
+        W_flat, rows = riccati_c.stack_rows_c(layout, c, cx, cu, cN, cxN, A, B, gap, pattern)
+    else:
+        W_flat, rows = _stack_rows(layout, c, cx, cu, cN, cxN, A, B, gap)
     m = rows.shape[1]
     if m == 0 or nu == 0:
         return Projection(np.zeros((n, nu)), np.zeros((n, nu, ndx)),
@@ -157,7 +167,7 @@ def project(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarra
     if method == "svd":
         sol = _svd_solve(W_flat[:-1].reshape(n, m, -1) * rows[..., None], nu, rtol)
     else:
-        sol = _qr_solve(W_flat, rows, nu, rtol, compiled=method == "qr" and _compiled())
+        sol = _qr_solve(W_flat, rows, nu, rtol, compiled=compiled)
     return Projection(sol.P_e, sol.P_x, sol.Z, sol.free, sol.pinv, rows, rows.any(axis=1),
                       int(np.count_nonzero(sol.unmet)))
 

@@ -37,6 +37,8 @@ enum { IN_A, IN_B, IN_LX, IN_LU, IN_LXX, IN_LUU, IN_LUX, IN_F, IN_LXN, IN_LXXN,
 enum { OUT_K, OUT_KFF, OUT_S, OUT_SV, OUT_QU, OUT_QUU, OUT_QUX, N_OUT };
 /* inputs of riccati_rollout */
 enum { RO_A, RO_B, RO_F, RO_K, RO_KFF, RO_DX0, N_RO };
+/* inputs of riccati_stack_rows */
+enum { SR_C, SR_BND, SR_CX, SR_CU, SR_CN, SR_BNDN, SR_CXN, SR_A, SR_B, SR_GAP, N_SR };
 
 #define NB 4  /* rows per block of the Cholesky factorisation and solves (= the tile rows) */
 
@@ -50,6 +52,10 @@ static size_t workspace_size(int ndx, int nu)
 /* element (i, r, c) of input k, through its strides */
 #define EL(k, i, r, c) (in[k] + (ptrdiff_t)(i) * st[3 * (k)] + (ptrdiff_t)(r) * st[3 * (k) + 1] \
                         + (ptrdiff_t)(c) * st[3 * (k) + 2])
+
+/* riccati_stack_rows: element (i, r, c) of input k; (r, c) of a terminal (1-D/2-D) input */
+#define SR(k, i, r, c) EL(k, i, r, c)
+#define SRN(k, r, c) (in[k] + (ptrdiff_t)(r) * st[3 * (k)] + (ptrdiff_t)(c) * st[3 * (k) + 1])
 
 #define RICCATI_KERNEL_PASS 1
 /* ---- baseline ISA: 2-wide vectors */
@@ -261,6 +267,107 @@ void riccati_al_rows(int n, const double *c, const double *lb, const double *ub,
     }
     sums[0] = total;
     sums[1] = vmax;
+}
+
+/*
+ * The rows [D | C | e] of every node for riccati_project (equality.py's _stack_rows).
+ *  Slots of node i: k "own" slots (constraint rows own_cols[s] of node i: D = cu, C = cx,
+ *  e = c - b), then m - k "next" slots: the state rows nxt_cols[t] (t < j) of node i+1
+ *  moved onto node i through the dynamics (J = cx of node i+1: D = J B_i, C = J A_i,
+ *  e = c - b + J gap_i) or, at node N-1, the terminal rows term_cols[t] (t < jt: J = cxN,
+ *  e = cN - bN + J gap); slots without a row are zero.
+ *  in[N_SR]: c, b (N, nc), cx (N, nc, ndx), cu (N, nc, nu), cN, bN (ncN), cxN (ncN, ndx),
+ *      A (N, ndx, ndx), B (N, ndx, nu), gap (N, ndx); st[3 * N_SR]: element strides (as
+ *      riccati_backward's).
+ *  own, nxt (N, nc): C-contiguous masks of the projected rows (EqualityLayout).
+ *  pat: the structural nonzeros of [A | B] (riccati_backward's), or NULL (dense).
+ *  W (N m + 1, nu + ndx + 1) and rows (N m): C-contiguous outputs, every element written
+ *  (the last row of W is zero; rows: 1 where the slot holds a projected row).
+ * Returns 0, or -1: out of memory.
+ */
+int riccati_stack_rows(int N, int nu, int ndx, int nc, int m, int k, int j, int jt,
+                       const int *own_cols, const int *nxt_cols, const int *term_cols,
+                       const double *const *in, const int64_t *st, const uint8_t *own,
+                       const uint8_t *nxt, const int *pat, double *W, uint8_t *rows)
+{
+    const int w = nu + ndx + 1, nab = ndx + nu, jm = j > jt ? j : jt;
+    /* strides in locals: the uint8 stores below may alias anything, st included */
+    ptrdiff_t s[N_SR][3];
+    for (int q = 0; q < N_SR; q++)
+        for (int d = 0; d < 3; d++) s[q][d] = (ptrdiff_t)st[3 * q + d];
+    const double *c = in[SR_C], *bnd = in[SR_BND], *cx = in[SR_CX], *cu = in[SR_CU],
+                 *cN = in[SR_CN], *bN = in[SR_BNDN], *cxN = in[SR_CXN], *gap = in[SR_GAP];
+    /* J^T (ndx x jm) of the moved rows and J [A | B] ((ndx + nu) x jm), slot-contiguous */
+    double *Jt = malloc(sizeof(double) * ((size_t)ndx * jm + (size_t)nab * jm + 1));
+    if (!Jt) return -1;
+    double *acc = Jt + (size_t)ndx * jm;
+    memset(W + (size_t)N * m * w, 0, sizeof(double) * w);  /* the scratch row */
+    for (int i = 0; i < N; i++) {
+        double *Wi = W + (size_t)i * m * w;
+        for (int t = 0; t < k; t++) {
+            int col = own_cols[t];
+            double *row = Wi + (size_t)t * w;
+            const double *u = cu + i * s[SR_CU][0] + col * s[SR_CU][1];
+            const double *x = cx + i * s[SR_CX][0] + col * s[SR_CX][1];
+            ptrdiff_t us = s[SR_CU][2], xs = s[SR_CX][2];
+            for (int q = 0; q < nu; q++) row[q] = u[q * us];
+            for (int q = 0; q < ndx; q++) row[nu + q] = x[q * xs];
+            Wi[(size_t)t * w + w - 1] = c[i * s[SR_C][0] + col * s[SR_C][1]]
+                                        - bnd[i * s[SR_BND][0] + col * s[SR_BND][1]];
+            rows[(size_t)i * m + t] = own[(size_t)i * nc + col];
+        }
+        int last = i == N - 1, nn = last ? jt : j;
+        /* slots without a row at this node: zero */
+        memset(Wi + (size_t)(k + nn) * w, 0, sizeof(double) * (size_t)(m - k - nn) * w);
+        memset(rows + (size_t)i * m + k + nn, 0, (size_t)(m - k - nn));
+        if (nn == 0) continue;
+        double *row0 = Wi + (size_t)k * w;
+        for (int t = 0; t < nn; t++) {
+            const double *J;
+            ptrdiff_t js;
+            if (last) {
+                int col = term_cols[t];
+                J = cxN + col * s[SR_CXN][0];
+                js = s[SR_CXN][1];
+                row0[(size_t)t * w + w - 1] = cN[col * s[SR_CN][0]] - bN[col * s[SR_BNDN][0]];
+                rows[(size_t)i * m + k + t] = 1;
+            } else {
+                int col = nxt_cols[t];
+                J = cx + (i + 1) * s[SR_CX][0] + col * s[SR_CX][1];
+                js = s[SR_CX][2];
+                row0[(size_t)t * w + w - 1] = c[(i + 1) * s[SR_C][0] + col * s[SR_C][1]]
+                    - bnd[(i + 1) * s[SR_BND][0] + col * s[SR_BND][1]];
+                rows[(size_t)i * m + k + t] = nxt[(size_t)i * nc + col];
+            }
+            for (int r = 0; r < ndx; r++) Jt[(size_t)r * nn + t] = J[r * js];
+        }
+        /* e += J gap */
+        for (int r = 0; r < ndx; r++) {
+            double g = gap[i * s[SR_GAP][0] + r * s[SR_GAP][1]];
+            for (int t = 0; t < nn; t++) row0[(size_t)t * w + w - 1] += Jt[(size_t)r * nn + t] * g;
+        }
+        /* J [A | B], column by column of [A | B] (its pattern's nonzeros only, if given) */
+        memset(acc, 0, sizeof(double) * (size_t)nab * nn);
+        for (int q = 0; q < nab; q++) {
+            int src = q < ndx ? SR_A : SR_B, cc = q < ndx ? q : q - ndx;
+            const double *M = in[src] + i * s[src][0] + cc * s[src][2];
+            ptrdiff_t rs = s[src][1];
+            double *a = acc + (size_t)q * nn;
+            int p0 = pat ? pat[q] : 0, p1 = pat ? pat[q + 1] : ndx;
+            for (int p = p0; p < p1; p++) {
+                int r = pat ? pat[nab + 1 + p] : p;
+                double v = M[r * rs];
+                const double *jr = Jt + (size_t)r * nn;
+                for (int t = 0; t < nn; t++) a[t] += v * jr[t];
+            }
+        }
+        for (int q = 0; q < nab; q++) {  /* A's columns to C (W column nu + q), B's to D */
+            int dst = q < ndx ? nu + q : q - ndx;
+            for (int t = 0; t < nn; t++) row0[(size_t)t * w + dst] = acc[(size_t)q * nn + t];
+        }
+    }
+    free(Jt);
+    return 0;
 }
 
 #else

@@ -41,11 +41,11 @@ from pathlib import Path
 import numpy as np
 
 from horizon_mpc import codegen
-from horizon_mpc.solvers.ilqr.equality import Projection
+from horizon_mpc.solvers.ilqr.equality import EqualityLayout, Projection
 from horizon_mpc.solvers.ilqr.riccati import BackwardResult
 
 __all__ = ["AbPattern", "AlRowsKernel", "available", "backward_pass_c", "library_path",
-           "linear_rollout_c", "project_rows_c", "uses_avx2"]
+           "linear_rollout_c", "project_rows_c", "stack_rows_c", "uses_avx2"]
 
 _log = logging.getLogger(__name__)
 
@@ -147,6 +147,9 @@ def _bind(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.riccati_rollout.restype = i
     lib.riccati_project.argtypes = [i, i, i, i, p, p, d, p, p, p, p, p, p, p, i]
     lib.riccati_project.restype = i
+    lib.riccati_stack_rows.argtypes = [i, i, i, i, i, i, i, i, p, p, p, ctypes.POINTER(p), p, p,
+                                       p, p, p, p]
+    lib.riccati_stack_rows.restype = i
     lib.riccati_al_rows.argtypes = [i, p, p, p, p, p, p, p, i, d, d, p, p, p, p]
     lib.riccati_al_rows.restype = None
     lib.riccati_has_avx2.argtypes = []
@@ -336,6 +339,58 @@ def linear_rollout_c(A, B, f, bw: BackwardResult,
                            dU.ctypes.data, _variant()) != 0:
         raise MemoryError("riccati_rollout: out of memory for its workspace")
     return dX, dU
+
+
+def _int32(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.int32)
+
+
+def stack_rows_c(layout: EqualityLayout, c, cx, cu, cN, cxN, A, B, gap,
+                 pattern: AbPattern | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``equality._stack_rows`` in C: the rows ``[D | C | e]`` of every node and their mask.
+
+    Same arguments and results (to rounding: the products with A and B sum in another
+    order); ``pattern``: the structural nonzeros of [A | B] (None: dense), whose other
+    entries are not read. The inputs are read through their strides (no copies).
+
+    Raises:
+        RuntimeError: the compiled library is not available (see :func:`available`).
+        ValueError: an array has the wrong shape.
+    """
+    lib = _load()
+    N, ndx, nu = _sizes(B)
+    nc = layout.own.shape[1]
+    ncN = layout.term.shape[0]
+    own_cols = _int32(np.flatnonzero(layout.own.any(axis=0)))
+    nxt_cols = _int32(np.flatnonzero(layout.next.any(axis=0)))
+    term_cols = _int32(np.flatnonzero(layout.term))
+    k, j, jt = len(own_cols), len(nxt_cols), len(term_cols)
+    m = k + max(j, jt)
+    W_flat = np.empty((N * m + 1, nu + ndx + 1))
+    rows = np.empty((N, m), bool)
+    if m == 0 or nu == 0:
+        W_flat[...] = 0.0
+        rows[...] = False
+        return W_flat, rows
+    if pattern is not None and pattern.mask.shape != (ndx, ndx + nu):
+        raise ValueError(f"pattern has shape {pattern.mask.shape}; expected {(ndx, ndx + nu)}")
+    ptrs, strides, _keep = _strided([
+        ("c", c, (N, nc)), ("layout.b", layout.b, (N, nc)), ("cx", cx, (N, nc, ndx)),
+        ("cu", cu, (N, nc, nu)), ("cN", cN, (ncN,)), ("layout.bN", layout.bN, (ncN,)),
+        ("cxN", cxN, (ncN, ndx)), ("A", A, (N, ndx, ndx)), ("B", B, (N, ndx, nu)),
+        ("gap", gap, (N, ndx))], 10)
+    own = np.ascontiguousarray(layout.own, dtype=np.uint8)
+    nxt = np.ascontiguousarray(layout.next, dtype=np.uint8)
+    if own.shape != (N, nc) or nxt.shape != (N, nc):
+        raise ValueError(f"layout.own/next have shapes {own.shape}/{nxt.shape}; expected "
+                         f"{(N, nc)}")
+    if lib.riccati_stack_rows(N, nu, ndx, nc, m, k, j, jt, own_cols.ctypes.data,
+                              nxt_cols.ctypes.data, term_cols.ctypes.data, ptrs,
+                              strides.ctypes.data, own.ctypes.data, nxt.ctypes.data,
+                              None if pattern is None else pattern.data.ctypes.data,
+                              W_flat.ctypes.data, rows.view(np.uint8).ctypes.data) != 0:
+        raise MemoryError("riccati_stack_rows: out of memory for its workspace")
+    return W_flat, rows
 
 
 def project_rows_c(W_flat: np.ndarray, rows: np.ndarray, nu: int,

@@ -141,11 +141,13 @@ class IlqrSolver(Solver):
         self._integrate = BufferedFunction(m.integrate)
         # the Riccati recursion in compiled C when available (numpy loop otherwise); sparse
         # dynamics Jacobians (go2 walking: 5 % of [A | B]) by their pattern
+        self._ab_pattern: riccati_c.AbPattern | None = None  # also read by the projection
         if self.opts["codegen"] and riccati_c.available():
             self._backward, self._rollout = riccati_c.backward_pass_c, riccati_c.linear_rollout_c
             pattern = None if m.ab_pattern is None else riccati_c.AbPattern.from_mask(
                 m.ab_pattern)
             if pattern is not None and pattern.density <= SPARSE_DYNAMICS:
+                self._ab_pattern = pattern
                 self._backward = functools.partial(riccati_c.backward_pass_c, pattern=pattern)
         else:
             self._backward, self._rollout = riccati.backward_pass, riccati.linear_rollout
@@ -306,7 +308,7 @@ class IlqrSolver(Solver):
         if self._layout.any:
             nc, ncN = m.nc_con, m.ncN_con
             proj = project(self._layout, ev["c"][:, :nc], q["cx"], q["cu"], ev["cN"][0, :ncN],
-                           q["cxN"], q["A"], q["B"], ev["gap"])
+                           q["cxN"], q["A"], q["B"], ev["gap"], pattern=self._ab_pattern)
             info["rank_deficient_nodes"] = float(proj.rank_deficient)
         while True:
             bw = self._backward(q["A"], q["B"], q["lx"], q["lu"], q["lxx"], q["luu"], q["lux"],
