@@ -23,9 +23,13 @@ inputs, take the SVD, which also serves as the reference (``project(..., method=
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.linalg.lapack import dtrtri as _trtri
+
+if TYPE_CHECKING:  # riccati_c imports this module
+    from horizon_mpc.solvers.ilqr.riccati_c import AbPattern
 
 __all__ = ["EqualityLayout", "Projection", "project"]
 
@@ -125,7 +129,7 @@ _METHODS = ("qr", "qr-numpy", "svd")
 def project(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarray,
             cN: np.ndarray, cxN: np.ndarray, A: np.ndarray, B: np.ndarray,
             gap: np.ndarray, rtol: float = 1e-9, method: str = "qr",
-            pattern: object | None = None) -> Projection:
+            pattern: AbPattern | None = None) -> Projection:
     """Linearised equality rows of every node and their null-space parametrisation.
 
     Args:
@@ -142,9 +146,9 @@ def project(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarra
             at every node (the reference; 2.3x slower in the go2 walking MPC, 3x on warm
             caches). Both give the same P_e, P_x, pinv, free and rank_deficient, to
             rounding, and orthonormal bases Z of the same null spaces.
-        pattern: the structural nonzeros of [A | B] (a :class:`.riccati_c.AbPattern`, the
-            backward pass's), read by the compiled row stacking of ``'qr'`` (its other
-            entries of A and B are not read); None: dense.
+        pattern: the structural nonzeros of [A | B] (the backward pass's), read by the
+            compiled row stacking of ``'qr'`` (its other entries of A and B are not read);
+            None: dense.
 
     Returns:
         The :class:`Projection` (``pinv`` may be a transposed view).
