@@ -182,6 +182,15 @@ def _compiled() -> bool:
     return riccati_c.available()
 
 
+def _slots(layout: EqualityLayout) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The slot layout of :func:`_stack_rows`: the constraint columns of the own rows, of
+    the rows of node k+1 and of the terminal rows, and the slots per node ``m``."""
+    own_cols = np.flatnonzero(layout.own.any(axis=0))
+    nxt_cols = np.flatnonzero(layout.next.any(axis=0))
+    term_cols = np.flatnonzero(layout.term)
+    return own_cols, nxt_cols, term_cols, len(own_cols) + max(len(nxt_cols), len(term_cols))
+
+
 def _stack_rows(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarray,
                 cN: np.ndarray, cxN: np.ndarray, A: np.ndarray, B: np.ndarray,
                 gap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -194,11 +203,8 @@ def _stack_rows(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.nd
     the unused rows evaluate to, not zeros: mask them before use.
     """
     n, ndx, nu = B.shape
-    own_cols = np.flatnonzero(layout.own.any(axis=0))
-    nxt_cols = np.flatnonzero(layout.next.any(axis=0))
-    term_cols = np.flatnonzero(layout.term)
+    own_cols, nxt_cols, term_cols, m = _slots(layout)
     k, j, jt = len(own_cols), len(nxt_cols), len(term_cols)
-    m = k + max(j, jt)
     rows = np.zeros((n, m), bool)
     if m == 0 or nu == 0:
         return np.zeros((n * m + 1, nu + ndx + 1)), rows

@@ -53,10 +53,6 @@ static size_t workspace_size(int ndx, int nu)
 #define EL(k, i, r, c) (in[k] + (ptrdiff_t)(i) * st[3 * (k)] + (ptrdiff_t)(r) * st[3 * (k) + 1] \
                         + (ptrdiff_t)(c) * st[3 * (k) + 2])
 
-/* riccati_stack_rows: element (i, r, c) of input k; (r, c) of a terminal (1-D/2-D) input */
-#define SR(k, i, r, c) EL(k, i, r, c)
-#define SRN(k, r, c) (in[k] + (ptrdiff_t)(r) * st[3 * (k)] + (ptrdiff_t)(c) * st[3 * (k) + 1])
-
 #define RICCATI_KERNEL_PASS 1
 /* ---- baseline ISA: 2-wide vectors */
 #define VW 2

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from horizon_mpc import codegen
-from horizon_mpc.solvers.ilqr.equality import EqualityLayout, Projection
+from horizon_mpc.solvers.ilqr.equality import EqualityLayout, Projection, _slots
 from horizon_mpc.solvers.ilqr.riccati import BackwardResult
 
 __all__ = ["AbPattern", "AlRowsKernel", "available", "backward_pass_c", "library_path",
@@ -246,6 +246,11 @@ class AbPattern:
         return float(self.mask.mean()) if self.mask.size else 1.0
 
 
+def _check_pattern(pattern: AbPattern | None, ndx: int, nu: int) -> None:
+    if pattern is not None and pattern.mask.shape != (ndx, ndx + nu):
+        raise ValueError(f"pattern has shape {pattern.mask.shape}; expected {(ndx, ndx + nu)}")
+
+
 def _sizes(B) -> tuple[int, int, int]:
     """(N, ndx, nu) from the shape of B."""
     shape = np.shape(B)
@@ -280,8 +285,7 @@ def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
     """
     lib = _load()
     N, ndx, nu = _sizes(B)
-    if pattern is not None and pattern.mask.shape != (ndx, ndx + nu):
-        raise ValueError(f"pattern has shape {pattern.mask.shape}; expected {(ndx, ndx + nu)}")
+    _check_pattern(pattern, ndx, nu)
     items = [("A", A, (N, ndx, ndx)), ("B", B, (N, ndx, nu)), ("lx", lx, (N, ndx)),
              ("lu", lu, (N, nu)), ("lxx", lxx, (N, ndx, ndx)), ("luu", luu, (N, nu, nu)),
              ("lux", lux, (N, nu, ndx)), ("f", f, (N, ndx)), ("lxN", lxN, (ndx,)),
@@ -361,29 +365,25 @@ def stack_rows_c(layout: EqualityLayout, c, cx, cu, cN, cxN, A, B, gap,
     N, ndx, nu = _sizes(B)
     nc = layout.own.shape[1]
     ncN = layout.term.shape[0]
-    own_cols = _int32(np.flatnonzero(layout.own.any(axis=0)))
-    nxt_cols = _int32(np.flatnonzero(layout.next.any(axis=0)))
-    term_cols = _int32(np.flatnonzero(layout.term))
-    k, j, jt = len(own_cols), len(nxt_cols), len(term_cols)
-    m = k + max(j, jt)
+    *cols, m = _slots(layout)
+    own_cols, nxt_cols, term_cols = map(_int32, cols)
+    if m == 0 or nu == 0:
+        return np.zeros((N * m + 1, nu + ndx + 1)), np.zeros((N, m), bool)
+    _check_pattern(pattern, ndx, nu)
     W_flat = np.empty((N * m + 1, nu + ndx + 1))
     rows = np.empty((N, m), bool)
-    if m == 0 or nu == 0:
-        W_flat[...] = 0.0
-        rows[...] = False
-        return W_flat, rows
-    if pattern is not None and pattern.mask.shape != (ndx, ndx + nu):
-        raise ValueError(f"pattern has shape {pattern.mask.shape}; expected {(ndx, ndx + nu)}")
     ptrs, strides, _keep = _strided([
         ("c", c, (N, nc)), ("layout.b", layout.b, (N, nc)), ("cx", cx, (N, nc, ndx)),
         ("cu", cu, (N, nc, nu)), ("cN", cN, (ncN,)), ("layout.bN", layout.bN, (ncN,)),
         ("cxN", cxN, (ncN, ndx)), ("A", A, (N, ndx, ndx)), ("B", B, (N, ndx, nu)),
         ("gap", gap, (N, ndx))], 10)
-    own = np.ascontiguousarray(layout.own, dtype=np.uint8)
-    nxt = np.ascontiguousarray(layout.next, dtype=np.uint8)
+    # bool masks as bytes, without a copy when they are contiguous already
+    own = np.ascontiguousarray(layout.own, dtype=bool).view(np.uint8)
+    nxt = np.ascontiguousarray(layout.next, dtype=bool).view(np.uint8)
     if own.shape != (N, nc) or nxt.shape != (N, nc):
         raise ValueError(f"layout.own/next have shapes {own.shape}/{nxt.shape}; expected "
                          f"{(N, nc)}")
+    k, j, jt = len(own_cols), len(nxt_cols), len(term_cols)
     if lib.riccati_stack_rows(N, nu, ndx, nc, m, k, j, jt, own_cols.ctypes.data,
                               nxt_cols.ctypes.data, term_cols.ctypes.data, ptrs,
                               strides.ctypes.data, own.ctypes.data, nxt.ctypes.data,
