@@ -94,6 +94,7 @@ from horizon_mpc.closed_loop_report import render_replay, summarise, write_repor
 from horizon_mpc.mpc.controller import WalkingMpc  # noqa: E402
 from horizon_mpc.nodes import mpc_node as mpc_node_module  # noqa: E402
 from horizon_mpc.nodes.mpc_node import MpcNode  # noqa: E402
+from horizon_mpc.nodes.mpc_parameters import DIAGNOSTICS_RATE  # noqa: E402
 from horizon_mpc.nodes.sim_node import SimNode  # noqa: E402
 
 ROBOTS = ("go2", "solo12", "anymal_c")
@@ -542,8 +543,12 @@ def measure(robot: str, mode: str = "realtime", duration: float | None = None,
                    str(child_figures)] if realtime else None
         t0 = time.perf_counter()
         with probe.installed():
+            # the MPC process as deployed: MpcProcess asks /diagnostics at every tick (the
+            # closed loop's per-tick solve times), the probe needs none of it
             rec = run(robot, segments, duration, mode, gif=False, iterations=iterations,
-                      mpc_command=command)
+                      mpc_command=command,
+                      mpc_parameters={"diagnostics_rate": DIAGNOSTICS_RATE} if realtime
+                      else None)
         run_wall = time.perf_counter() - t0
         if realtime:
             if not child_figures.exists():

@@ -55,19 +55,24 @@ def _percentiles(x: np.ndarray) -> dict[str, float]:
 def _ticks(d: dict[str, np.ndarray], t0: float, t1: float, period: float,
            deadline_misses: int) -> dict:
     """Tick figures over the recorded span [t0, t1] (s of sim time): ticks per sim second
-    and control periods without a tick (from the ticks' stamps), solve time percentiles
-    (the first tick, the bootstrap solve, apart), deadline misses, plan age."""
+    and control periods without a tick (from the plans' stamps: every tick publishes one
+    plan), solve time percentiles over the ticks whose solve time was heard (every tick
+    with the MPC's diagnostics at every tick, a sample of them at a lower
+    ``diagnostics_rate``; the first tick, the bootstrap solve, apart), deadline misses,
+    plan age."""
     tick_t, tick = d["tick_t"], d["tick_time"]
+    plan_t = d["plan_t"] if d["plan_t"].size else tick_t
     prepare = d["prepare_time"] if d["prepare_time"].size == tick.size else np.zeros(tick.size)
     span = t1 - t0 + period  # the control periods recorded, both ends included
-    inside = int(np.count_nonzero((tick_t >= t0 - 1e-9) & (tick_t <= t1 + 1e-9)))
+    inside = int(np.count_nonzero((plan_t >= t0 - 1e-9) & (plan_t <= t1 + 1e-9)))
     expected = span / period if period > 0 else math.nan
-    solves = max(tick.size - 1, 0)
+    solves = max(plan_t.size - 1, 0)
     return {
-        "ticks": int(tick.size),
+        "ticks": int(plan_t.size),
         "ticks_per_sim_second": inside / span if span > 0 else math.nan,
         "periods_without_tick_percent": 100.0 * max(expected - inside, 0.0) / expected
         if expected > 0 else math.nan,
+        "tick_time_samples": max(int(tick.size) - 1, 0),
         "tick_time_ms": _percentiles(tick[1:]),
         # a tick's latency plus the preparation of the next after it: what must fit a period
         "tick_work_ms": _percentiles(tick[1:] + np.nan_to_num(prepare[1:tick.size])),

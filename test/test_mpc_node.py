@@ -319,8 +319,27 @@ def test_a_sim_clock_that_restarts_does_not_silence_the_path(context, walking_mp
     node.destroy_node()
 
 
-def test_by_default_diagnostics_go_out_every_tick(context, walking_mpc):
+def test_by_default_diagnostics_go_out_at_10_hz_and_count_the_ticks_between(
+        context, walking_mpc):
     node = sim_time_node(context, walking_mpc)
+    assert node.get_parameter("diagnostics_rate").value == 10.0
+    out = drive_in_sim_time(node, 21)  # 0.4 s of 50 Hz ticks
+    assert len(out["traj"]) == 21
+    sent = [(time_to_ns(m.header.stamp), m.status[0].level,
+             {kv.key: kv.value for kv in m.status[0].values}) for m in out["diag"]]
+    # 10 Hz, or at once when the level rises (this scripted state never follows the plan:
+    # the real-time iterations after the bootstrap report WARN)
+    assert 3 <= len(sent) <= 7
+    for (t0, level0, _), (t1, level1, _) in itertools.pairwise(sent):
+        assert t1 - t0 >= 0.09 * NS_PER_S or level1 > level0
+    for stamp, _, values in sent:  # every tick counted, also those without a status
+        assert int(values["ticks"]) == (stamp - 10 * NS_PER_S) // 20_000_000 + 1
+        assert float(values["solve_time_max_ms"]) >= float(values["solve_time_ms"]) > 0.0
+    node.destroy_node()
+
+
+def test_diagnostics_rate_0_sends_a_status_every_tick(context, walking_mpc):
+    node = sim_time_node(context, walking_mpc, diagnostics_rate=0.0)
     out = drive_in_sim_time(node, 4)
     assert len(out["diag"]) == len(out["traj"]) == 4
     values = {kv.key: kv.value for kv in out["diag"][-1].status[0].values}

@@ -23,11 +23,14 @@ from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.locomotion.gaits import GAITS
 from horizon_mpc.locomotion.settings import Weights
 
-__all__ = ["LIVE_GAIT", "LIVE_LIMITS", "WEIGHT_FIELDS", "MpcParameters"]
+__all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "WEIGHT_FIELDS", "MpcParameters"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
 LIVE_LIMITS = ("max_vx", "max_vy", "max_wz")
+# Hz of the node clock: a status every fifth 50 Hz tick (diagnostic tools poll at ~1 Hz);
+# its values summarise the ticks in between (solve_time_max_ms, ticks, deadline_misses)
+DIAGNOSTICS_RATE = 10.0
 
 
 def _range(lo: float, hi: float) -> list[FloatingPointRange]:
@@ -88,8 +91,8 @@ class MpcParameters:
           irng=[IntegerRange(from_value=1, to_value=1000, step=1)], ro=True)
         d("path_rate", 10.0, "~/predicted_base_path messages per second of the node clock "
           "(at most one per tick; 0: every tick)", _range(0, 1000), ro=True)
-        d("diagnostics_rate", 0.0, "/diagnostics messages per second of the node clock (at "
-          "most one per tick, and at once when the level rises; 0: every tick)",
+        d("diagnostics_rate", DIAGNOSTICS_RATE, "/diagnostics messages per second of the "
+          "node clock (at most one per tick, and at once when the level rises; 0: every tick)",
           _range(0, 1000), ro=True)
         self._check_trigger(self._p("trigger"))
 
