@@ -323,6 +323,59 @@ def test_projection_kernel_matches_the_numpy_qr(isa):
     np.testing.assert_array_equal(Z[0], np.eye(nu))
 
 
+def test_rows_on_one_input_are_eliminated_exactly(isa):
+    """Rows with one nonzero in D (a swing foot's zero force) fix their input and are
+    eliminated from the other rows before the QR: the same D^+, P_e, P_x and null space as
+    the whole QR, with the pinned column also in the other rows, scaled pinned rows, only
+    pinned rows, and two rows on one input (dependent: left to the SVD)."""
+    from horizon_mpc.solvers.ilqr import equality
+
+    rng = np.random.default_rng(11)
+    N, m, nu, ndx = 6, 8, 7, 5
+    W = rng.standard_normal((N * m + 1, nu + ndx + 1))
+    W[-1] = 0.0
+    rows = np.zeros((N, m), bool)
+    rows[:, :5] = True  # 5 rows on 7 inputs
+
+    def pin(node, slot, col, scale=1.0, zero_rest=True):
+        r = W[node * m + slot]
+        r[:nu] = 0.0
+        r[col] = scale
+        if zero_rest:
+            r[nu:-1] = 0.0  # a zero-force row: f_col = 0 (C = 0, e = the force)
+
+    pin(0, 0, 2)  # node 0: one pinned row, column 2 also in the general rows
+    pin(1, 1, 0, -2.5, zero_rest=False)
+    pin(1, 3, 6, 0.3)  # node 1: two scaled pinned rows, one with a state part
+    for j in range(5):  # node 2: only pinned rows
+        pin(2, j, (2 * j + 1) % nu, 1.0 + j)
+    pin(3, 0, 4)
+    pin(3, 2, 4, 2.0)  # node 3: two rows on input 4: dependent
+    rows[4, 2:] = False  # node 4: general rows only (the whole QR)
+    pin(5, 4, 1)
+    W[5 * m + 4, -1] = 3.0  # node 5: a nonzero target on the pinned input
+    P_e, P_x, Z, free, pinv, ok, unmet = riccati_c.project_rows_c(W, rows, nu, 1e-9)
+    assert ok.tolist() == [True, True, True, False, True, True]
+    good = ok
+    Wm = W[:-1].reshape(N, m, -1) * rows[..., None]
+    ref = equality._svd_solve(Wm, nu, 1e-9)
+    for got, want in ((P_e, ref.P_e), (P_x, ref.P_x), (pinv, ref.pinv), (free, ref.free)):
+        np.testing.assert_allclose(got[good], want[good], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(P_e[5, 1], -3.0)  # d f = -e
+    proj = Z @ np.swapaxes(Z, 1, 2)
+    np.testing.assert_allclose(proj[good], (ref.Z @ np.swapaxes(ref.Z, 1, 2))[good],
+                               atol=1e-12)
+    D = Wm[..., :nu]
+    assert np.max(np.abs(D[good] @ Z[good])) <= 1e-12
+    # Z: zero range columns, orthonormal null columns; pinned inputs are not in the null space
+    for k in np.flatnonzero(good):
+        Zk = Z[k][:, free[k] > 0]
+        np.testing.assert_allclose(Zk.T @ Zk, np.eye(Zk.shape[1]), atol=1e-12)
+        assert np.all(Z[k][:, free[k] == 0] == 0.0)
+    assert np.all(Z[0][2] == 0.0) and np.all(Z[1][[0, 6]] == 0.0)
+    assert not unmet[good].any()
+
+
 def _stack_problem(N, ndx, nu, n_in, n_state, n_term, seed):
     """Random rows for ``equality._stack_rows``: input rows at some nodes, state rows of
     node k+1 at others (none at every third node), ``n_term`` terminal rows."""
