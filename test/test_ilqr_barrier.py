@@ -88,6 +88,28 @@ def test_the_reused_barrier_terms_follow_the_rows_values_bounds_and_parameters()
     assert al.value(c) == fresh(c, lb=lb2, mu=0.1)
 
 
+def test_the_multiplier_update_of_barrier_rows_has_nothing_to_do_but_for_equalities():
+    """Barrier rows carry no multiplier nor penalty: with no equality row the update says
+    so (the caller keeps the terms' value); an equality row gets its multiplier, and a row
+    that becomes an equality starts without a progress history (no penalty raise yet)."""
+    lb = np.array([[-1.0, 0.0]] * 2)
+    ub = np.array([[1.0, np.inf]] * 2)
+    al = AugmentedLagrangian(lb, ub, 10.0, inequality="barrier")
+    c = np.array([[2.0, -1.0]] * 2)  # both rows violated
+    before = al.value(c)
+    assert al.update(c, 10.0, 1e6) is False
+    assert al.value(c) == before and not al.lam.any() and np.all(al.rho == 10.0)
+    lb2, ub2 = lb.copy(), ub.copy()
+    lb2[:, 1] = ub2[:, 1] = 0.5  # row 1 becomes an equality
+    al.set_bounds(lb2, ub2)
+    assert al.update(c, 10.0, 1e6) is True
+    np.testing.assert_allclose(al.lam[:, 1], 10.0 * (-1.0 - 0.5))
+    assert np.all(al.rho == 10.0)  # its first update: no history to compare with
+    assert al.update(c, 10.0, 1e6) is True  # no progress since: the penalty rises
+    np.testing.assert_allclose(al.rho[:, 1], 100.0)
+    np.testing.assert_allclose(al.rho[:, 0], 10.0)  # the barrier row keeps its own
+
+
 def test_unknown_inequality_mode_and_bad_barrier_parameters_are_refused():
     lb, ub = np.zeros((2, 1)), np.ones((2, 1))
     with pytest.raises(ValueError, match="inequality"):

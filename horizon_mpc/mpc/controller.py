@@ -365,18 +365,19 @@ class WalkingMpc:
             self.cmd[i] += min(max(target - self.cmd[i], -step), step)
 
     def _advance_pose_ref(self, q: np.ndarray, dt: float) -> None:
-        x, y, yaw = self.pose_ref
-        vx, vy, wz = self.cmd
+        # three numbers: plain floats (numpy's per-call overhead dominates here)
+        x, y, yaw = self.pose_ref.tolist()
+        vx, vy, wz = self.cmd.tolist()
+        qx, qy = float(q[0]), float(q[1])
         c, s = math.cos(yaw), math.sin(yaw)
-        self.pose_ref = np.array([x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy),
-                                  yaw + dt * wz])
+        x, y, yaw = x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz
         # never wind up: keep the reference within reach of the measured pose
-        err = self.pose_ref[:2] - q[:2]
-        dist = float(np.linalg.norm(err))
+        dist = math.hypot(x - qx, y - qy)
         if dist > 0.15:
-            self.pose_ref[:2] = q[:2] + err * 0.15 / dist
-        yaw_err = _wrap(self.pose_ref[2] - _yaw(q))
-        self.pose_ref[2] = _yaw(q) + float(np.clip(yaw_err, -0.3, 0.3))
+            x, y = qx + (x - qx) * 0.15 / dist, qy + (y - qy) * 0.15 / dist
+        yaw_q = _yaw(q)
+        yaw = yaw_q + min(max(_wrap(yaw - yaw_q), -0.3), 0.3)
+        self.pose_ref = np.array([x, y, yaw])
 
     def _set_references(self, t: float) -> None:
         wp, st = self.wp, self.settings
@@ -439,7 +440,7 @@ def _stats_dict(stats: SolverStats) -> dict:
 
 
 def _yaw(q: np.ndarray) -> float:
-    x, y, z, w = q[3:7]
+    x, y, z, w = q[3:7].tolist()
     return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 

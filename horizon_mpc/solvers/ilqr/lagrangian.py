@@ -91,11 +91,11 @@ class AugmentedLagrangian:
         self.rho = np.full(shape, float(rho0))
         self.rho0 = rho0
         self._kernel = None
+        self._last_violation = np.full(shape, np.inf)
         self.set_bounds(lb, ub)
         if compiled:  # bound once: it reads bounds, multipliers and penalties in place
             self._kernel = _kernel(self.lb, self.ub, self.lam, self.lam_lo, self.lam_up,
                                    self.rho)
-        self._last_violation = np.full_like(lb, np.inf)
 
     def set_bounds(self, lb: np.ndarray, ub: np.ndarray) -> None:
         """New bounds (a row whose kind changes gets its multipliers reset)."""
@@ -109,7 +109,9 @@ class AugmentedLagrangian:
             changed = (eq != self.eq) | (np.isfinite(lb) != np.isfinite(self.lb)) | (
                 np.isfinite(ub) != np.isfinite(self.ub))
             self.lam[changed] = self.lam_lo[changed] = self.lam_up[changed] = 0.0
+            self._last_violation[changed] = np.inf  # no progress history of a new row
         self.lb, self.ub, self.eq = lb, ub, eq
+        self._any_eq = bool(eq.any())
         self.has_lo = np.isfinite(lb) & ~eq
         self.has_up = np.isfinite(ub) & ~eq
         self._barrier_memo = None
@@ -224,9 +226,14 @@ class AugmentedLagrangian:
         return w, t
 
     def update(self, c: np.ndarray, rho_factor: float, rho_max: float,
-               decrease: float = 0.25) -> None:
+               decrease: float = 0.25) -> bool:
         """First-order multiplier update; raise ``rho`` on rows that did not improve enough
-        (barrier rows have neither)."""
+        (barrier rows have neither). Returns False when there was nothing to update (the
+        terms' value at ``c`` is unchanged)."""
+        if self.barrier and not self._any_eq:
+            # barrier rows carry no multiplier nor penalty; the violation history only
+            # serves equality rows (set_bounds restarts it for a row that becomes one)
+            return False
         rho = self.rho
         eq, up, lo = self.eq, self.has_up, self.has_lo
         self.lam[eq] += rho[eq] * (c[eq] - self.lb[eq])
@@ -240,6 +247,7 @@ class AugmentedLagrangian:
             self.lam_lo[lo] = np.maximum(0.0, self.lam_lo[lo] + rho[lo] * (self.lb[lo] - c[lo]))
         self.rho[slow] = np.minimum(rho[slow] * rho_factor, rho_max)
         self._last_violation = viol
+        return True
 
     def shift(self) -> None:
         """Receding horizon: multipliers and penalties move one node back."""

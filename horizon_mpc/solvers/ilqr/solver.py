@@ -390,9 +390,10 @@ class IlqrSolver(Solver):
         return ev, info
 
     def _update_multipliers(self, ev: dict[str, Any], rho_factor: float) -> None:
-        self._al.update(ev["c"], rho_factor, self.opts["rho_max"])
-        self._alN.update(ev["cN"], rho_factor, self.opts["rho_max"])
-        ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
+        changed = self._al.update(ev["c"], rho_factor, self.opts["rho_max"])
+        changed |= self._alN.update(ev["cN"], rho_factor, self.opts["rho_max"])
+        if changed:
+            ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
 
     def _begin_call(self) -> dict[str, Any] | None:
         """What :meth:`solve` and :meth:`prepare` start with: fresh timings and merit
