@@ -97,7 +97,8 @@ class MpcProcess:
     def __init__(self, robot: str, iterations: int | None = None, domain_id: int | None = None,
                  parameters: Mapping[str, object] | None = None,
                  command: Sequence[str] | None = None) -> None:
-        # diagnostics_rate 0: /diagnostics on every tick, which is how the parent counts them
+        # diagnostics_rate 0: /diagnostics on every tick, the closed loop's per-tick solve
+        # times (ticks themselves are counted by their plans)
         params: dict[str, object] = {"robot": robot, "use_sim_time": True, "trigger": "timer"}
         if iterations is not None:  # None: the robot config's mpc.iterations
             params["iterations"] = int(iterations)

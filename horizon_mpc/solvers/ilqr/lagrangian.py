@@ -104,16 +104,16 @@ class AugmentedLagrangian:
         if lb.shape != self.lam.shape or ub.shape != self.lam.shape:
             raise ValueError(f"bounds of shape {lb.shape}, {ub.shape}; the rows have shape "
                              f"{self.lam.shape}")
-        eq = np.isfinite(lb) & (lb == ub)
-        if hasattr(self, "eq"):
-            changed = (eq != self.eq) | (np.isfinite(lb) != np.isfinite(self.lb)) | (
-                np.isfinite(ub) != np.isfinite(self.ub))
+        finite_lb, finite_ub = np.isfinite(lb), np.isfinite(ub)
+        eq = finite_lb & (lb == ub)
+        has_lo, has_up = finite_lb & ~eq, finite_ub & ~eq
+        if hasattr(self, "eq"):  # a row's kind: equality, lower side, upper side
+            changed = (eq != self.eq) | (has_lo != self.has_lo) | (has_up != self.has_up)
             self.lam[changed] = self.lam_lo[changed] = self.lam_up[changed] = 0.0
             self._last_violation[changed] = np.inf  # no progress history of a new row
         self.lb, self.ub, self.eq = lb, ub, eq
         self._any_eq = bool(eq.any())
-        self.has_lo = np.isfinite(lb) & ~eq
-        self.has_up = np.isfinite(ub) & ~eq
+        self.has_lo, self.has_up = has_lo, has_up
         self._barrier_memo = None
         if self._kernel is not None:
             self._kernel.set_bounds(lb, ub)
@@ -122,7 +122,7 @@ class AugmentedLagrangian:
         self._b = np.where(eq, lb, 0.0)
         self._lo = np.where(self.has_lo, lb, 0.0)
         self._up = np.where(self.has_up, ub, 0.0)
-        self._any = (bool(eq.any()), bool(self.has_up.any()), bool(self.has_lo.any()))
+        self._any = (self._any_eq, bool(self.has_up.any()), bool(self.has_lo.any()))
         # barrier rows, flat: upper sides then lower sides (a row may have both)
         self._iu, self._il = np.flatnonzero(self.has_up), np.flatnonzero(self.has_lo)
         self._bu, self._bl = self.ub.ravel()[self._iu], self.lb.ravel()[self._il]
