@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from horizon_mpc.solvers.ilqr import riccati_c
+from horizon_mpc.solvers.ilqr import merit, riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, Projection, project
 from horizon_mpc.solvers.ilqr.riccati import backward_pass, linear_rollout
 
@@ -440,3 +440,42 @@ def test_projection_with_compiled_stacking_matches_the_numpy_path(compiled, monk
     for name in ("P_e", "P_x", "pinv", "free"):
         np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=1e-9,
                                    atol=1e-11, err_msg=name)
+
+
+# ------------------------------------------------------------------ merit terms
+
+def _step(rng, N=6, ndx=5, nu=4, m=3):
+    return dict(lx=rng.standard_normal((N, ndx)), lu=rng.standard_normal((N, nu)),
+                lxN=rng.standard_normal(ndx), s=rng.standard_normal((N + 1, ndx)),
+                S=rng.standard_normal((N + 1, ndx, ndx)), Qu=rng.standard_normal((N, nu)),
+                Quu=rng.standard_normal((N, nu, nu)), Qux=rng.standard_normal((N, nu, ndx)),
+                dX=rng.standard_normal((N + 1, ndx)), dU=rng.standard_normal((N, nu)),
+                pinv=None if m is None else rng.standard_normal((N, nu, m)))
+
+
+@pytest.mark.parametrize("sizes", [{}, dict(m=None), dict(m=0), dict(nu=0, m=None),
+                                   dict(N=1, ndx=1, nu=1, m=1)])
+def test_step_stats_match_numpy(compiled, sizes):
+    data = _step(np.random.default_rng(6), **sizes)
+    ref = merit.step_stats(**data)
+    got = riccati_c.step_stats_c(**data)
+    assert np.allclose(got, ref, rtol=1e-12, atol=1e-12)
+    costates = data["s"] + np.einsum("kij,kj->ki", data["S"], data["dX"])
+    assert got[1] >= np.abs(costates).max() - 1e-12  # the costates bound it from below
+
+
+def test_step_stats_multipliers_of_the_projected_rows_count(compiled):
+    data = _step(np.random.default_rng(7))
+    small = merit.step_stats(**dict(data, pinv=None))[1]
+    data["pinv"] *= 1e3  # the projected rows' multipliers now dominate
+    big = riccati_c.step_stats_c(**data)[1]
+    assert big > 10 * small
+    assert big == pytest.approx(merit.step_stats(**data)[1], rel=1e-12)
+
+
+@pytest.mark.parametrize("field, index", [("dX", 1), ("dX", 2), ("dU", 3)])
+def test_step_stats_propagate_nan_into_the_maxima(compiled, field, index):
+    data = _step(np.random.default_rng(8))
+    data[field][2, 0] = np.nan
+    got, ref = riccati_c.step_stats_c(**data), merit.step_stats(**data)
+    assert np.isnan(got[index]) and np.isnan(ref[index])

@@ -179,6 +179,74 @@ int riccati_project(int N, int m, int nu, int ndx, const double *W, const uint8_
     return project_base(N, m, nu, ndx, W, rows, rtol, P_e, P_x, Z, fr, pinv, ok, unmet);
 }
 
+/* max of |x| that propagates NaN as numpy's max does */
+static inline void absmax(double x, double *vmax, int *nan)
+{
+    double a = fabs(x);
+    if (a > *vmax) *vmax = a;
+    else if (a != a) *nan = 1;
+}
+
+/*
+ * The scalar measures of a step (solver.py's _step; merit.py's step_stats in numpy). Inputs
+ * C-contiguous: lx (N, ndx), lu (N, nu), lxN (ndx); the backward pass's s (N+1, ndx),
+ * S (N+1, ndx, ndx), Qu (N, nu), Quu (N, nu, nu), Qux (N, nu, ndx); the step dX (N+1, ndx),
+ * dU (N, nu); pinv (N, nu, m) (the projection's D^+, or NULL).
+ *  out[4]: the directional derivative of the cost lx.dX + lu.dU + lxN.dX_N; the largest
+ *      multiplier estimate: |s + S dX| (costates) and, with pinv, |D^+^T (Qu + Quu dU +
+ *      Qux dX)| (the projected rows'); max |dX|; max |dU| (0 without inputs). A NaN
+ *      anywhere in a maximum's terms makes it NaN.
+ * Returns 0, or -1: out of memory.
+ */
+int riccati_step_stats(int N, int ndx, int nu, int m, const double *lx, const double *lu,
+                       const double *lxN, const double *s, const double *S,
+                       const double *Qu, const double *Quu, const double *Qux,
+                       const double *dX, const double *dU, const double *pinv, double *out)
+{
+    double slope = 0.0, lmax = 0.0, xmax = 0.0, umax = 0.0;
+    int lnan = 0, xnan = 0, unan = 0;
+    double *g = malloc(sizeof(double) * ((size_t)nu + 1));
+    if (!g) return -1;
+    for (int i = 0; i <= N; i++) {
+        const double *x = dX + (size_t)i * ndx;
+        const double *Si = S + (size_t)i * ndx * ndx, *si = s + (size_t)i * ndx;
+        for (int a = 0; a < ndx; a++) {
+            double v = si[a];
+            for (int k = 0; k < ndx; k++) v += Si[(size_t)a * ndx + k] * x[k];
+            absmax(v, &lmax, &lnan);
+            absmax(x[a], &xmax, &xnan);
+            slope += (i < N ? lx[(size_t)i * ndx + a] : lxN[a]) * x[a];
+        }
+        if (i == N) break;
+        const double *u = dU + (size_t)i * nu;
+        for (int a = 0; a < nu; a++) {
+            slope += lu[(size_t)i * nu + a] * u[a];
+            absmax(u[a], &umax, &unan);
+        }
+        if (!pinv || !m) continue;
+        for (int a = 0; a < nu; a++) {
+            const double *quu = Quu + ((size_t)i * nu + a) * nu;
+            const double *qux = Qux + ((size_t)i * nu + a) * ndx;
+            double v = Qu[(size_t)i * nu + a];
+            for (int k = 0; k < nu; k++) v += quu[k] * u[k];
+            for (int k = 0; k < ndx; k++) v += qux[k] * x[k];
+            g[a] = v;
+        }
+        const double *P = pinv + (size_t)i * nu * m;
+        for (int j = 0; j < m; j++) {
+            double v = 0.0;
+            for (int a = 0; a < nu; a++) v -= P[(size_t)a * m + j] * g[a];
+            absmax(v, &lmax, &lnan);
+        }
+    }
+    free(g);
+    out[0] = slope;
+    out[1] = lnan ? NAN : lmax;
+    out[2] = xnan ? NAN : xmax;
+    out[3] = unan ? NAN : umax;
+    return 0;
+}
+
 /*
  * Augmented-Lagrangian / relaxed-barrier terms of n constraint rows (lagrangian.py's
  * AugmentedLagrangian.value, .violation and .weights_targets in one pass).

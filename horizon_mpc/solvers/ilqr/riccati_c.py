@@ -45,7 +45,8 @@ from horizon_mpc.solvers.ilqr.equality import EqualityLayout, Projection, _slots
 from horizon_mpc.solvers.ilqr.riccati import BackwardResult
 
 __all__ = ["AbPattern", "AlRowsKernel", "available", "backward_pass_c", "library_path",
-           "linear_rollout_c", "project_rows_c", "stack_rows_c", "uses_avx2"]
+           "linear_rollout_c", "project_rows_c", "stack_rows_c",
+           "step_stats_c", "uses_avx2"]
 
 _log = logging.getLogger(__name__)
 
@@ -152,6 +153,8 @@ def _bind(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.riccati_stack_rows.restype = i
     lib.riccati_al_rows.argtypes = [i, p, p, p, p, p, p, p, i, d, d, p, p, p, p]
     lib.riccati_al_rows.restype = None
+    lib.riccati_step_stats.argtypes = [i] * 4 + [p] * 12
+    lib.riccati_step_stats.restype = i
     lib.riccati_has_avx2.argtypes = []
     lib.riccati_has_avx2.restype = i
     return lib
@@ -427,6 +430,45 @@ def project_rows_c(W_flat: np.ndarray, rows: np.ndarray, nu: int,
     if ret != 0:
         raise MemoryError("riccati_project: out of memory for its workspace")
     return P_e, P_x, Z, free, pinv, ok.astype(bool), unmet.astype(bool)
+
+
+def _contiguous(name: str, a, shape: tuple[int, ...], dtype=np.float64) -> np.ndarray:
+    """``a`` as a C-contiguous array of ``dtype`` (no copy when it is one; masks: bool or
+    uint8 as uint8); ValueError on a wrong shape: the C code trusts the shapes."""
+    if dtype is np.uint8:
+        a = np.ascontiguousarray(a, dtype=bool).view(np.uint8)
+    else:
+        a = np.ascontiguousarray(a, dtype=dtype)
+    if a.shape != shape:
+        raise ValueError(f"{name} has shape {a.shape}; expected {shape}")
+    return a
+
+
+def step_stats_c(lx, lu, lxN, s, S, Qu, Quu, Qux, dX, dU, pinv
+                 ) -> tuple[float, float, float, float]:
+    """:func:`.merit.step_stats` in one compiled pass: the same arguments (any array layout;
+    non-contiguous ones are copied) and results.
+
+    Raises:
+        RuntimeError: the compiled library is not available (see :func:`available`).
+        ValueError: an array has the wrong shape.
+    """
+    lib = _load()
+    N, nu = np.shape(dU)
+    ndx = np.shape(dX)[1]
+    m = 0 if pinv is None else np.shape(pinv)[2]
+    arrays = [_contiguous("lx", lx, (N, ndx)), _contiguous("lu", lu, (N, nu)),
+              _contiguous("lxN", lxN, (ndx,)), _contiguous("s", s, (N + 1, ndx)),
+              _contiguous("S", S, (N + 1, ndx, ndx)), _contiguous("Qu", Qu, (N, nu)),
+              _contiguous("Quu", Quu, (N, nu, nu)), _contiguous("Qux", Qux, (N, nu, ndx)),
+              _contiguous("dX", dX, (N + 1, ndx)), _contiguous("dU", dU, (N, nu))]
+    if m:  # kept alive until the call
+        pinv = _contiguous("pinv", pinv, (N, nu, m))
+    out = np.empty(4)
+    if lib.riccati_step_stats(N, ndx, nu, m, *(a.ctypes.data for a in arrays),
+                              pinv.ctypes.data if m else None, out.ctypes.data):
+        raise MemoryError("riccati_step_stats: out of memory for its workspace")
+    return tuple(out.tolist())
 
 
 class AlRowsKernel:

@@ -31,7 +31,7 @@ from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.problem import Problem
 from horizon_mpc.problem.terms import stacked_bounds, stacked_weights
 from horizon_mpc.solvers.base import Solver
-from horizon_mpc.solvers.ilqr import riccati, riccati_c
+from horizon_mpc.solvers.ilqr import merit, riccati, riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
 from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian
 from horizon_mpc.solvers.ilqr.stages import build_stage_model
@@ -142,8 +142,10 @@ class IlqrSolver(Solver):
         # the Riccati recursion in compiled C when available (numpy loop otherwise); sparse
         # dynamics Jacobians (go2 walking: 5 % of [A | B]) by their pattern
         self._ab_pattern: riccati_c.AbPattern | None = None  # also read by the projection
+        self._step_stats = merit.step_stats
         if self.opts["codegen"] and riccati_c.available():
             self._backward, self._rollout = riccati_c.backward_pass_c, riccati_c.linear_rollout_c
+            self._step_stats = riccati_c.step_stats_c
             pattern = None if m.ab_pattern is None else riccati_c.AbPattern.from_mask(
                 m.ab_pattern)
             if pattern is not None and pattern.density <= SPARSE_DYNAMICS:
@@ -201,10 +203,11 @@ class IlqrSolver(Solver):
         self._al.set_bounds(lb, ub)
         self._alN.set_bounds(lbN, ubN)
         self._choose_quadratisation(lb[:, :m.nc_con], ub[:, :m.nc_con])
-        self.Wr = stacked_weights(m.stage_costs)[:, :N].T if m.stage_costs else np.zeros(
-            (N, 0))  # (N, nr)
-        self.WrN = stacked_weights(m.term_costs)[:, N:].T if m.term_costs else np.zeros(
-            (1, 0))  # (1, nrN)
+        # C-contiguous (N, nr) and (1, nrN): read as they are by the compiled merit terms
+        self.Wr = np.ascontiguousarray(stacked_weights(m.stage_costs)[:, :N].T) \
+            if m.stage_costs else np.zeros((N, 0))
+        self.WrN = np.ascontiguousarray(stacked_weights(m.term_costs)[:, N:].T) \
+            if m.term_costs else np.zeros((1, 0))
 
     def _choose_quadratisation(self, lb: np.ndarray, ub: np.ndarray) -> None:
         """The lean quadratisation (no AL terms for the projected equalities) unless a row it
@@ -233,24 +236,18 @@ class IlqrSolver(Solver):
             d0 = self._difference(X[0], self.x_init)[0].reshape(m.ndx).copy()
         else:
             d0 = np.zeros(m.ndx)
-        # one finiteness test: NaN and inf propagate through the sums (inf - inf is NaN)
-        if not math.isfinite(float(self._values.output_buffer.sum())
-                             + float(self._values_term.output_buffer.sum()) + float(d0.sum())):
-            return None
         lay = self._layout
-        eq = np.abs(np.where(self._eq_rows, c[:, :m.nc_con] - lay.b, 0.0))
-        eqN = np.abs(np.where(lay.term, cN[0, :m.ncN_con] - lay.bN, 0.0))
-        abs_gap, abs_d0 = np.abs(gap), np.abs(d0)
+        stats = merit.evaluation_stats(gap, r, self.Wr, c, lay.b, self._eq_rows, d0, rN[0],
+                                       self.WrN[0], cN[0], lay.bN, lay.term)
+        if stats is None:  # a value is not finite
+            return None
+        cost, gap_l1, gap_max, eq_l1, eq_max = stats
         al, al_viol = self._al.value_and_violation(c)
         alN, alN_viol = self._alN.value_and_violation(cN)
         return {
             "gap": gap, "r": r, "c": c, "rN": rN, "cN": cN, "d0": d0,
-            "eq_l1": float(eq.sum() + eqN.sum()),
-            "cost": float(np.vdot(self.Wr, r * r) + np.vdot(self.WrN, rN * rN)),
-            "al": al + alN,
-            "gap_l1": float(abs_gap.sum() + abs_d0.sum()),
-            "viol": float(max(abs_gap.max(initial=0.0), abs_d0.max(initial=0.0),
-                              eq.max(initial=0.0), eqN.max(initial=0.0), al_viol, alN_viol)),
+            "eq_l1": eq_l1, "cost": cost, "al": al + alN, "gap_l1": gap_l1,
+            "viol": max(gap_max, eq_max, al_viol, alN_viol),
         }
 
     def _merit(self, ev: dict[str, Any], nu: float) -> float:
@@ -345,17 +342,11 @@ class IlqrSolver(Solver):
         dX, dU = self._rollout(q["A"], q["B"], ev["gap"], bw, dx0)
         self.feedback_gains = bw.K
         # directional derivative of the model cost along the step; the gaps shrink linearly
-        slope = float(np.einsum("ij,ij->", q["lx"], dX[:-1]) + np.einsum("ij,ij->", q["lu"], dU)
-                      + q["lxN"] @ dX[-1])
-        # l1 merit weight above the dynamics multipliers s_k + S_k dx_k of the LQ solution
-        costates = bw.s + np.einsum("kij,kj->ki", bw.S, dX)
-        lam_max = float(np.max(np.abs(costates)))
-        if proj is not None and proj.pinv.shape[2]:
-            # multipliers of the projected rows: D^T lam = -(Q_u + Q_uu du + Q_ux dx)
-            grad = bw.Qu + np.einsum("kij,kj->ki", bw.Quu, dU) + np.einsum(
-                "kij,kj->ki", bw.Qux, dX[:-1])
-            lam = -np.einsum("kum,ku->km", proj.pinv, grad)
-            lam_max = max(lam_max, float(np.max(np.abs(lam))))
+        # the cost's directional derivative and the largest multiplier estimate (costates
+        # and, with a projection, the projected rows' multipliers) set the merit's weight
+        slope, lam_max, dx_max, du_max = self._step_stats(
+            q["lx"], q["lu"], q["lxN"], bw.s, bw.S, bw.Qu, bw.Quu, bw.Qux, dX, dU,
+            None if proj is None else proj.pinv)
         self._nu = max(self._nu, 1.5 * lam_max, 1.0)
         nu = self._nu
         merit0 = self._merit(ev, nu)
@@ -384,7 +375,7 @@ class IlqrSolver(Solver):
             self.X, self.U, ev = best
             self.mu = max(self.mu / 10, o["mu_min"])
             info.update(alpha=alpha, accepted=1.0, expected=deriv)
-        info["step_norm"] = float(alpha * (np.max(np.abs(dX)) + np.max(np.abs(dU), initial=0)))
+        info["step_norm"] = alpha * (dx_max + du_max)
         self._time("rollout", t3 - t2)
         self._time("line_search", t4 - t3)
         return ev, info
