@@ -108,6 +108,37 @@ def test_go2_sizes_match_numpy(isa, with_projection):
     _assert_same(riccati_c.backward_pass_c(*args, 1e-6, proj), backward_pass(*args, 1e-6, proj))
 
 
+
+@pytest.mark.parametrize("N, ndx, nu, n_general", [(8, 7, 6, 1), (5, 36, 30, 12)])
+def test_inputs_pinned_by_their_rows_are_left_out_exactly(isa, N, ndx, nu, n_general):
+    """Rows on one input with no state part (a swing foot's zero force, here with nonzero
+    targets) leave that input dead: zero rows in Z and P_x. The compiled pass skips it in
+    its products; K's row is zero, k is P_e's, and all else matches numpy's full products."""
+    args = _lq(N=N, ndx=ndx, nu=nu, seed=5)
+    rng = np.random.default_rng(9)
+    pinned = [1, 4] if nu < 10 else list(range(12, 30, 3))
+    nc = len(pinned) + n_general
+    cu = np.zeros((N, nc, nu))
+    cx = np.zeros((N, nc, ndx))
+    for j, a in enumerate(pinned):
+        cu[:, j, a] = 1.0 + j
+    cu[:, len(pinned):] = rng.standard_normal((N, n_general, nu))
+    cx[:, len(pinned):] = rng.standard_normal((N, n_general, ndx))
+    own = np.ones((N, nc), bool)
+    own[::4] = False  # unconstrained nodes too
+    layout = EqualityLayout(own, np.zeros((N, nc), bool), np.zeros(0, bool),
+                            np.zeros((N, nc)), np.zeros(0))
+    proj = project(layout, rng.standard_normal((N, nc)), cx, cu, np.zeros(0),
+                   np.zeros((0, ndx)), args[0], args[1], args[7])
+    con = proj.constrained
+    assert con.any() and not con.all()
+    assert np.all(proj.Z[con][:, pinned] == 0.0) and np.all(proj.P_x[con][:, pinned] == 0.0)
+    assert np.all(np.abs(proj.P_e[con][:, pinned]) > 0.0)
+    got = riccati_c.backward_pass_c(*args, 1e-6, proj)
+    _assert_same(got, backward_pass(*args, 1e-6, proj))
+    assert np.all(got.K[con][:, pinned] == 0.0)
+    np.testing.assert_array_equal(got.k[con][:, pinned], proj.P_e[con][:, pinned])
+
 def _sparse_dynamics(args, seed=7):
     """``args`` with A = I + a few couplings, B nonzero on a band (a legged robot's Euler
     step), and its pattern with one extra structural entry that is numerically zero."""

@@ -46,7 +46,7 @@ enum { SR_C, SR_BND, SR_CX, SR_CU, SR_CN, SR_BNDN, SR_CXN, SR_A, SR_B, SR_GAP, N
 static size_t workspace_size(int ndx, int nu)
 {
     size_t m = (size_t)ndx + (size_t)nu, x = (size_t)ndx, u = (size_t)nu;
-    return 2 * x * m + 3 * x + m + 4 * u * u + 3 * u * x + 3 * u;
+    return 2 * x * m + 3 * x + m + 5 * u * u + 5 * u * x + 4 * u;
 }
 
 /* element (i, r, c) of input k, through its strides */
@@ -116,7 +116,7 @@ int riccati_backward(int N, int ndx, int nu, const double *const *in, const int6
 {
     double *w = malloc(sizeof(double) * (workspace_size(ndx, nu) + 1));
     double *vals = malloc(sizeof(double) * ((pat ? (size_t)pat[ndx + nu] : 0) + 1));
-    int *cols = malloc(sizeof(int) * ((size_t)nu + 1));
+    int *cols = malloc(sizeof(int) * (2 * (size_t)nu + 1));
     int ret = -1;
     *fail_node = -1;
     if (w && vals && cols) {
@@ -626,7 +626,15 @@ static inline void get_mat(int rows, int cols, const double *src, ptrdiff_t rs, 
     if (cs == 1) {
         for (int r = 0; r < rows; r++) copy(cols, src + r * rs, dst + r * ld);
     } else if (rs == 1) {  /* column-major block (the solver's CasADi buffers) */
-        for (int c = 0; c < cols; c++)
+        int c = 0;
+        for (; c + 4 <= cols; c += 4) {  /* 4 columns at a time: 4 reading streams */
+            const double *s0 = src + c * cs, *s1 = s0 + cs, *s2 = s1 + cs, *s3 = s2 + cs;
+            for (int r = 0; r < rows; r++) {
+                double *d = dst + r * ld + c;
+                d[0] = s0[r]; d[1] = s1[r]; d[2] = s2[r]; d[3] = s3[r];
+            }
+        }
+        for (; c < cols; c++)
             for (int r = 0; r < rows; r++) dst[r * ld + c] = src[r + c * cs];
     } else {
         for (int r = 0; r < rows; r++)
@@ -736,6 +744,11 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
     double *Pe = T + nu * ndx;      /* nu: P_e */
     double *wk = Pe + nu;           /* r: right-hand side, then solution, for k */
     double *v = wk + nu;            /* nu */
+    double *Quul = v + nu;          /* nl x nl: Q_uu on the live inputs */
+    double *Quxl = Quul + nu * nu;  /* nl x ndx: Q_ux on the live inputs */
+    double *Kl = Quxl + nu * ndx;   /* nl x ndx: K on the live inputs */
+    double *gl = Kl + nu * ndx;     /* nl: Q_uu P_e + Q_u on the live inputs */
+    int *live = cols + nu;          /* nl: the live inputs */
 
     get_mat(ndx, ndx, in[IN_LXXN], st[3 * IN_LXXN], st[3 * IN_LXXN + 1],
             S + (size_t)N * ndx * ndx, ndx);
@@ -753,13 +766,15 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
         for (int r = 0; r < ndx; r++) g[r] = sn[r] + dot(ndx, Sn + r * ndx, fi);
         get_vec(ndx, EL(IN_LX, i, 0, 0), st[3 * IN_LX + 1], qx);
         get_vec(nu, EL(IN_LU, i, 0, 0), st[3 * IN_LU + 1], Qu);
-        get_mat(ndx, ndx, EL(IN_LXX, i, 0, 0), st[3 * IN_LXX + 1], st[3 * IN_LXX + 2], Si, ndx);
+        /* l_xx enters S_i only, whose symmetric part is all that is kept (see the end of the
+         * loop): read it as its transpose, row by row from the column-major buffer */
+        get_mat(ndx, ndx, EL(IN_LXX, i, 0, 0), st[3 * IN_LXX + 2], st[3 * IN_LXX + 1], Si, ndx);
         get_mat(nu, ndx, EL(IN_LUX, i, 0, 0), st[3 * IN_LUX + 1], st[3 * IN_LUX + 2], Qux, ndx);
         get_mat(nu, nu, EL(IN_LUU, i, 0, 0), st[3 * IN_LUU + 1], st[3 * IN_LUU + 2], Quu, nu);
         if (pat) {
             /* [A B] by its structural nonzeros (CSC): Yt = [A B]^T S' row by row (an axpy of
-             * a row of S' per nonzero), then Q_xx += Yt_A A, Q_ux += Yt_B A, Q_uu += Yt_B B
-             * by the columns of the pattern */
+             * a row of S' per nonzero), then [A B]^T S' [A B] (Q_xx, Q_ux and Q_uu's terms)
+             * row by row from its transpose */
             const int *cp = pat, *ri = pat + m + 1;
             for (int j = 0; j < m; j++) {
                 double *yt = SAB + (size_t)j * ndx, a = 0.0;
@@ -773,20 +788,18 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
                 if (j < ndx) qx[j] += a;
                 else Qu[j - ndx] += a;
             }
-            for (int j = 0; j < m; j++) {
-                const double *yt = SAB + (size_t)j * ndx;
-                double *qa = j < ndx ? Si + (size_t)j * ndx : Qux + (size_t)(j - ndx) * ndx;
-                for (int k = 0; k < ndx; k++) {
-                    double a = 0.0;
-                    for (int p = cp[k]; p < cp[k + 1]; p++) a += vals[p] * yt[ri[p]];
-                    qa[k] += a;
-                }
-                if (j < ndx) continue;
-                double *qb = Quu + (size_t)(j - ndx) * nu;
-                for (int k = 0; k < nu; k++) {
-                    double a = 0.0;
-                    for (int p = cp[ndx + k]; p < cp[ndx + k + 1]; p++) a += vals[p] * yt[ri[p]];
-                    qb[k] += a;
+            /* Y2 = S' [A B] (ndx x m) = Yt^T; then row k of [A B]^T Y2 is the sum, over the
+             * nonzeros (r, k) of [A B], of v Y2[r]: contiguous axpys (Q_xx needs the first
+             * ndx columns only) */
+            double *Y2 = AB;
+            get_mat(ndx, m, SAB, 1, ndx, Y2, m);  /* Yt read as the column-major Y2 */
+            for (int k = 0; k < m; k++) {
+                double *qa = k < ndx ? Si + (size_t)k * ndx : Qux + (size_t)(k - ndx) * ndx;
+                double *qb = k < ndx ? NULL : Quu + (size_t)(k - ndx) * nu;
+                for (int p = cp[k]; p < cp[k + 1]; p++) {
+                    const double *y = Y2 + (size_t)ri[p] * m;
+                    axpy(ndx, vals[p], y, qa);
+                    if (qb) axpy(nu, vals[p], y + ndx, qb);
                 }
             }
         } else {
@@ -810,52 +823,96 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
             /* du = P_e + P_x dx + Z w. Only the nonzero columns of Z take part: a zero column
              * j adds the decoupled pivot 1 - free_j to H and nothing to the solution. In
              * numpy a non-finite Q_uu spreads NaN over all of H (0 * inf), hence the check. */
-            for (int p = 0; p < nu * nu; p++)
-                if (!isfinite(Quu[p])) { *fail_node = i; return 1; }
+            vec zv = vbc(0.0);  /* stays 0 unless an entry is NaN or inf (one branch) */
+            int p = 0;
+            for (; p + VW <= nu * nu; p += VW) zv += vbc(0.0) * vload(Quu + p);
+            double zero = vsum(zv);
+            for (; p < nu * nu; p++) zero += 0.0 * Quu[p];
+            if (zero != 0.0) { *fail_node = i; return 1; }
             const double *Z = EL(IN_Z, i, 0, 0), *fr = EL(IN_FREE, i, 0, 0);
+            const double *Pxi = EL(IN_PX, i, 0, 0);
             const ptrdiff_t zr = st[3 * IN_Z + 1], zc = st[3 * IN_Z + 2], fs = st[3 * IN_FREE + 1];
-            int r = 0;
+            const ptrdiff_t pr = st[3 * IN_PX + 1], pc = st[3 * IN_PX + 2];
+            /* the nonzero columns and rows of Z by sums of |Z| (nonnegative terms: zero only
+             * when all are; no early exits, so they vectorise) */
+            double *colsum = v;
+            int nl = 0, r = 0;
+            for (int j = 0; j < nu; j++) colsum[j] = 0.0;
+            for (int a = 0; a < nu; a++) {
+                double rowsum = 0.0;
+                for (int j = 0; j < nu; j++) {
+                    double z = fabs(Z[a * zr + j * zc]);
+                    colsum[j] += z;
+                    rowsum += z;
+                }
+                live[a] = rowsum != 0.0;
+            }
             for (int j = 0; j < nu; j++) {
-                int nonzero = 0;
-                for (int a = 0; a < nu && !nonzero; a++) nonzero = Z[a * zr + j * zc] != 0.0;
-                if (nonzero) cols[r++] = j;
+                if (colsum[j] != 0.0) cols[r++] = j;
                 else if (!(1.0 - fr[j * fs] > 0.0)) { *fail_node = i; return 1; }
             }
-            for (int a = 0; a < nu; a++)
-                for (int q = 0; q < r; q++) Zc[a * r + q] = Z[a * zr + cols[q] * zc];
-            get_mat(nu, ndx, EL(IN_PX, i, 0, 0), st[3 * IN_PX + 1], st[3 * IN_PX + 2], Px, ndx);
+            /* An input whose rows of Z and P_x are zero (a swing foot's force pinned by its
+             * row) is dead: its rows of K are zero and its k is P_e's. The products run on
+             * the nl live inputs only (go2 trotting: 24 of 30). */
+            for (int a = 0; a < nu; a++) {
+                int nz = live[a];
+                for (int c = 0; c < ndx && !nz; c++) nz = Pxi[a * pr + c * pc] != 0.0;
+                if (nz) live[nl++] = a;  /* nl <= a: overwrites entries already read */
+            }
+            for (int a = 0; a < nl; a++)
+                for (int q = 0; q < r; q++) Zc[a * r + q] = Z[live[a] * zr + cols[q] * zc];
+            for (int a = 0; a < nl; a++)
+                for (int c = 0; c < ndx; c++) Px[a * ndx + c] = Pxi[live[a] * pr + c * pc];
             get_vec(nu, EL(IN_PE, i, 0, 0), st[3 * IN_PE + 1], Pe);
-            /* Mz = Zc^T Q_uu; [W | wk] = Mz [P_x | P_e] + Zc^T [Q_ux | Q_u] */
-            gemm(r, nu, nu, Zc, 1, r, Quu, nu, Mz, nu, 0);
-            gemm(r, ndx, nu, Mz, nu, 1, Px, ndx, W, ndx, 0);
-            gemm(r, ndx, nu, Zc, 1, r, Qux, ndx, W, ndx, 1);
-            for (int q = 0; q < r; q++) wk[q] = dot(nu, Mz + q * nu, Pe);
-            for (int q = 0; q < r; q++) v[q] = 0.0;
-            for (int a = 0; a < nu; a++) axpy(r, Qu[a], Zc + a * r, v);
-            for (int q = 0; q < r; q++) wk[q] += v[q];
+            const int all = nl == nu;  /* nothing dead: Q_uu, Q_ux and K as they are */
+            const double *Qll = Quu, *Qlx = Qux;
+            double *Kli = all ? Ki : Kl;
+            if (!all) {
+                for (int a = 0; a < nl; a++) {
+                    for (int b = 0; b < nl; b++) Quul[a * nl + b] = Quu[live[a] * nu + live[b]];
+                    copy(ndx, Qux + (size_t)live[a] * ndx, Quxl + (size_t)a * ndx);
+                }
+                Qll = Quul;
+                Qlx = Quxl;
+            }
+            /* Mz = Zc^T Q_uu; [W | wk] = Mz P_x + Zc^T Q_ux | Zc^T (Q_uu P_e + Q_u) */
+            gemm(r, nl, nl, Zc, 1, r, Qll, nl, Mz, nl, 0);
+            gemm(r, ndx, nl, Mz, nl, 1, Px, ndx, W, ndx, 0);
+            gemm(r, ndx, nl, Zc, 1, r, Qlx, ndx, W, ndx, 1);
+            for (int a = 0; a < nl; a++)
+                gl[a] = dot(nu, Quu + (size_t)live[a] * nu, Pe) + Qu[live[a]];
+            for (int q = 0; q < r; q++) wk[q] = 0.0;
+            for (int a = 0; a < nl; a++) axpy(r, gl[a], Zc + a * r, wk);
             /* H = Mz Zc + diag(1 - free), factored; [W | wk] := H^-1 [W | wk] */
-            gemm(r, r, nu, Mz, nu, 1, Zc, r, H, r, 0);
+            gemm(r, r, nl, Mz, nl, 1, Zc, r, H, r, 0);
             for (int q = 0; q < r; q++) H[q * r + q] += 1.0 - fr[cols[q] * fs];
             lower_to_upper(r, H, r, U);
             if (chol_upper(r, U)) { *fail_node = i; return 1; }
             chol_solve(r, U, ndx, W, ndx);
             chol_solve_vec(r, U, wk);
-            /* K = P_x - Zc W, k = P_e - Zc wk */
-            gemm(nu, ndx, r, Zc, r, 1, W, ndx, Ki, ndx, 0);
-            for (int p = 0; p < nu * ndx; p++) Ki[p] = Px[p] - Ki[p];
-            for (int a = 0; a < nu; a++) ki[a] = Pe[a] - dot(r, Zc + a * r, wk);
+            /* K = P_x - Zc W (zero rows for dead inputs), k = P_e - Zc wk */
+            gemm(nl, ndx, r, Zc, r, 1, W, ndx, Kli, ndx, 0);
+            for (int p = 0; p < nl * ndx; p++) Kli[p] = Px[p] - Kli[p];
+            if (!all) {
+                for (int p = 0; p < nu * ndx; p++) Ki[p] = 0.0;
+                for (int a = 0; a < nl; a++)
+                    copy(ndx, Kl + (size_t)a * ndx, Ki + (size_t)live[a] * ndx);
+            }
+            copy(nu, Pe, ki);
+            for (int a = 0; a < nl; a++) ki[live[a]] -= dot(r, Zc + a * r, wk);
             /* S_i = Q_xx + K^T Q_uu K + K^T Q_ux + Q_ux^T K: the symmetric part of
              * Q_xx + K^T (Q_uu K + 2 Q_ux), which the symmetrisation below takes (one
-             * product fewer); s_i = Q_x + K^T (Q_uu k + Q_u) + Q_ux^T k */
-            for (int p = 0; p < nu * ndx; p++) T[p] = 2.0 * Qux[p];
-            gemm(nu, ndx, nu, Quu, nu, 1, Ki, ndx, T, ndx, 1);
-            gemm(ndx, ndx, nu, Ki, 1, ndx, T, ndx, Si, ndx, 1);
-            for (int a = 0; a < nu; a++) v[a] = dot(nu, Quu + a * nu, ki) + Qu[a];
+             * product fewer), summed over the live inputs; s_i = Q_x + K^T (Q_uu k + Q_u)
+             * + Q_ux^T k */
+            for (int p = 0; p < nl * ndx; p++) T[p] = 2.0 * Qlx[p];
+            gemm(nl, ndx, nl, Qll, nl, 1, Kli, ndx, T, ndx, 1);
+            gemm(ndx, ndx, nl, Kli, 1, ndx, T, ndx, Si, ndx, 1);
             for (int c = 0; c < ndx; c++) acc[c] = 0.0;
-            for (int a = 0; a < nu; a++) {
-                axpy(ndx, v[a], Ki + a * ndx, acc);
-                axpy(ndx, ki[a], Qux + a * ndx, acc);
+            for (int a = 0; a < nl; a++) {
+                double va = dot(nu, Quu + (size_t)live[a] * nu, ki) + Qu[live[a]];
+                axpy(ndx, va, Kli + (size_t)a * ndx, acc);
             }
+            for (int a = 0; a < nu; a++) axpy(ndx, ki[a], Qux + a * ndx, acc);
         } else {
             /* K = -Q_uu^-1 Q_ux, k = -Q_uu^-1 Q_u; S_i = Q_xx + Q_ux^T K, s_i = Q_x + Q_ux^T k */
             lower_to_upper(nu, Quu, nu, U);
