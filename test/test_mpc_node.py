@@ -627,3 +627,37 @@ def test_the_diagnostics_message_is_refilled_with_each_ticks_values_and_keys():
     assert status.level == b"\x01" and status.message == "solver: rti"
     third = diag.filled(3, b"\x00", "ok", {"a": 0, "c": None})  # other keys: new pairs
     assert [(kv.key, kv.value) for kv in third.status[0].values] == [("a", "0"), ("c", "None")]
+
+
+def test_the_trajectory_message_is_refilled_with_each_plan():
+    from types import SimpleNamespace
+
+    from horizon_mpc.nodes.mpc_outputs import fill_trajectory
+
+    def plan(seed, nodes=8, nj=3):
+        rng = np.random.default_rng(seed)
+        tau = rng.standard_normal((6 + nj, nodes))
+        return SimpleNamespace(q=rng.standard_normal((7 + nj, nodes + 1)),
+                               v=rng.standard_normal((6 + nj, nodes + 1)),
+                               a=rng.standard_normal((6 + nj, nodes)), dt=0.02,
+                               tau_head=lambda n: tau[:, :n])
+
+    names = ["j0", "j1", "j2"]
+    msg = JointTrajectory()
+    first = fill_trajectory(msg, plan(0), names, 4, 1_500_000_000)
+    points = list(first.points)
+    p = plan(1)
+    second = fill_trajectory(msg, p, names, 4, 2_000_000_001)
+    assert second is msg and all(a is b for a, b in zip(points, second.points, strict=True))
+    assert (second.header.stamp.sec, second.header.stamp.nanosec) == (2, 1)
+    assert list(second.joint_names) == names
+    for k, pt in enumerate(second.points):
+        np.testing.assert_array_equal(pt.positions, p.q[7:, k])
+        np.testing.assert_array_equal(pt.velocities, p.v[6:, k])
+        np.testing.assert_array_equal(pt.accelerations, p.a[6:, k])
+        np.testing.assert_array_equal(pt.effort, p.tau_head(4)[6:, k])
+        assert seconds_from_duration(pt.time_from_start) == pytest.approx(0.02 * k)
+    # fewer points (the plan's nodes or publish_points) or other joints: new points
+    assert len(fill_trajectory(msg, plan(2, nodes=2), names, 4, 0).points) == 2
+    third = fill_trajectory(msg, plan(3, nj=2), ["a", "b"], 4, 0)
+    assert list(third.joint_names) == ["a", "b"] and len(third.points[0].effort) == 2

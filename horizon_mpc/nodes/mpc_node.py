@@ -39,8 +39,8 @@ from horizon_mpc.nodes.mpc_outputs import (
     DiagnosticsMessage,
     due,
     fill_path,
+    fill_trajectory,
     period_ns,
-    trajectory_from_plan,
 )
 from horizon_mpc.nodes.mpc_parameters import LIVE_LIMITS, MpcParameters
 from horizon_mpc.nodes.spin import spin_until_signal
@@ -110,6 +110,7 @@ class MpcNode(MpcParameters, Node):
         self._last_diag: tuple[int, bytes] | None = None  # (node clock ns, level) last sent
         self._solve_time_max = 0.0  # s, over the ticks since the last diagnostics
         self._path = Path()  # reused: its poses are overwritten in place (see path_msg)
+        self._trajectory = JointTrajectory()  # reused likewise (see trajectory_msg)
         self._diag = DiagnosticsMessage(f"{self.get_name()}: walking MPC", mpc.cfg.name)
 
         # latest accepted inputs: (stamp ns, arrays...) / (receipt time s, cmd)
@@ -318,8 +319,10 @@ class MpcNode(MpcParameters, Node):
     # ------------------------------------------------------------------ outputs
     def trajectory_msg(self, plan: Plan, stamp_ns: int) -> JointTrajectory:
         """The first ``publish_points`` nodes of ``plan`` (joints in model order); efforts
-        from the inverse dynamics of those nodes only (:func:`trajectory_from_plan`)."""
-        return trajectory_from_plan(plan, self.joint_names, self.publish_points, stamp_ns)
+        from the inverse dynamics of those nodes only. The node's one JointTrajectory,
+        refilled in place (:func:`fill_trajectory`): copy it to keep it past the next call."""
+        return fill_trajectory(self._trajectory, plan, self.joint_names, self.publish_points,
+                               stamp_ns)
 
     def path_msg(self, plan: Plan, stamp_ns: int) -> Path:
         """The planned base poses of every node, frame ``odom``: the node's one Path message,

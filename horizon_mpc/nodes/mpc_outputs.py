@@ -2,7 +2,7 @@
 
 Built for the tick's hot path (``doc/mpc_node.md``, Measured): joint arrays go into messages
 as ``array.array`` (the fastest type rclpy takes for ``sequence<double>``), and the messages
-published at a lower rate (path, diagnostics) are refilled in place rather than rebuilt.
+(trajectory, path, diagnostics) are refilled in place rather than rebuilt.
 Conventions as in :mod:`horizon_mpc.nodes.conversions`.
 """
 
@@ -18,36 +18,41 @@ from nav_msgs.msg import Path
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from horizon_mpc.mpc.controller import Plan
-from horizon_mpc.nodes.conversions import NS_PER_S, duration_from_seconds, time_from_ns
+from horizon_mpc.nodes.conversions import NS_PER_S, duration_from_seconds
 
-__all__ = ["DiagnosticsMessage", "due", "fill_path", "period_ns", "set_stamp",
-           "trajectory_from_plan"]
+__all__ = ["DiagnosticsMessage", "due", "fill_path", "fill_trajectory", "period_ns",
+           "set_stamp"]
 
 
-def trajectory_from_plan(plan: Plan, joint_names: list[str], n: int,
-                         stamp_ns: int) -> JointTrajectory:
-    """Nodes 0..n-1 of ``plan`` (joints in model order), ``time_from_start = k dt``.
+def fill_trajectory(msg: JointTrajectory, plan: Plan, joint_names: list[str], n: int,
+                    stamp_ns: int) -> JointTrajectory:
+    """``msg`` refilled in place with nodes 0..n-1 of ``plan`` (joints in model order),
+    ``time_from_start = k dt``; its points are created when their number or the joints
+    change only (go2, 6 points: ~48 us to build anew, ~38 to refill; best of 5 x 200).
 
-    Efforts are ``plan.tau_head(n)[6:]``: the inverse dynamics of these nodes only.
+    Efforts are ``plan.tau_head(n)[6:]``: the inverse dynamics of these nodes only. Copy the
+    message to keep it past the next call.
     """
-    msg = JointTrajectory()
-    msg.header.stamp = time_from_ns(stamp_ns)
-    msg.joint_names = joint_names
     n = min(n, plan.a.shape[1])
-    # one C-ordered (4, n, nj) block: each point's field is one row of it
+    nj = len(joint_names)
+    if len(msg.points) != n or list(msg.joint_names) != list(joint_names):
+        msg.joint_names = list(joint_names)
+        msg.points = [JointTrajectoryPoint(**{f: array.array("d", bytes(8 * nj))
+                                              for f in _POINT_FIELDS}) for _ in range(n)]
+    set_stamp(msg.header.stamp, stamp_ns)
+    # one C-ordered (4, n, nj) block: each point's field is one row of it, copied into the
+    # point's array in place
     rows = np.stack((plan.q[7:, :n].T, plan.v[6:, :n].T, plan.a[6:, :n].T,
                      plan.tau_head(n)[6:].T))
-    points = []
-    for k in range(n):
-        pt = JointTrajectoryPoint()
-        pt.positions = array.array("d", rows[0, k].tobytes())
-        pt.velocities = array.array("d", rows[1, k].tobytes())
-        pt.accelerations = array.array("d", rows[2, k].tobytes())
-        pt.effort = array.array("d", rows[3, k].tobytes())
-        pt.time_from_start = duration_from_seconds(k * plan.dt)
-        points.append(pt)
-    msg.points = points
+    for k, pt in enumerate(msg.points):
+        for f, field in enumerate(_POINT_FIELDS):
+            np.frombuffer(getattr(pt, field), np.float64)[:] = rows[f, k]
+        d = duration_from_seconds(k * plan.dt)
+        pt.time_from_start.sec, pt.time_from_start.nanosec = d.sec, d.nanosec
     return msg
+
+
+_POINT_FIELDS = ("positions", "velocities", "accelerations", "effort")
 
 
 def fill_path(msg: Path, plan: Plan, stamp_ns: int, frame_id: str = "odom") -> Path:
