@@ -45,8 +45,7 @@ from horizon_mpc.solvers.ilqr.equality import EqualityLayout, Projection, _slots
 from horizon_mpc.solvers.ilqr.riccati import BackwardResult
 
 __all__ = ["AbPattern", "AlRowsKernel", "available", "backward_pass_c", "library_path",
-           "linear_rollout_c", "project_rows_c", "stack_rows_c",
-           "step_stats_c", "uses_avx2"]
+           "linear_rollout_c", "project_rows_c", "stack_rows_c", "step_stats_c", "uses_avx2"]
 
 _log = logging.getLogger(__name__)
 
@@ -432,13 +431,10 @@ def project_rows_c(W_flat: np.ndarray, rows: np.ndarray, nu: int,
     return P_e, P_x, Z, free, pinv, ok.astype(bool), unmet.astype(bool)
 
 
-def _contiguous(name: str, a, shape: tuple[int, ...], dtype=np.float64) -> np.ndarray:
-    """``a`` as a C-contiguous array of ``dtype`` (no copy when it is one; masks: bool or
-    uint8 as uint8); ValueError on a wrong shape: the C code trusts the shapes."""
-    if dtype is np.uint8:
-        a = np.ascontiguousarray(a, dtype=bool).view(np.uint8)
-    else:
-        a = np.ascontiguousarray(a, dtype=dtype)
+def _contiguous(name: str, a, shape: tuple[int, ...]) -> np.ndarray:
+    """``a`` as a C-contiguous float64 array (no copy when it is one); ValueError on a wrong
+    shape: the C code trusts the shapes."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
     if a.shape != shape:
         raise ValueError(f"{name} has shape {a.shape}; expected {shape}")
     return a

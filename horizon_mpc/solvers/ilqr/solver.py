@@ -203,11 +203,10 @@ class IlqrSolver(Solver):
         self._al.set_bounds(lb, ub)
         self._alN.set_bounds(lbN, ubN)
         self._choose_quadratisation(lb[:, :m.nc_con], ub[:, :m.nc_con])
-        # C-contiguous (N, nr) and (1, nrN): read as they are by the compiled merit terms
-        self.Wr = np.ascontiguousarray(stacked_weights(m.stage_costs)[:, :N].T) \
-            if m.stage_costs else np.zeros((N, 0))
-        self.WrN = np.ascontiguousarray(stacked_weights(m.term_costs)[:, N:].T) \
-            if m.term_costs else np.zeros((1, 0))
+        self.Wr = stacked_weights(m.stage_costs)[:, :N].T if m.stage_costs else np.zeros(
+            (N, 0))  # (N, nr)
+        self.WrN = stacked_weights(m.term_costs)[:, N:].T if m.term_costs else np.zeros(
+            (1, 0))  # (1, nrN)
 
     def _choose_quadratisation(self, lb: np.ndarray, ub: np.ndarray) -> None:
         """The lean quadratisation (no AL terms for the projected equalities) unless a row it
@@ -341,9 +340,9 @@ class IlqrSolver(Solver):
         t2 = time.perf_counter()
         dX, dU = self._rollout(q["A"], q["B"], ev["gap"], bw, dx0)
         self.feedback_gains = bw.K
-        # directional derivative of the model cost along the step; the gaps shrink linearly
-        # the cost's directional derivative and the largest multiplier estimate (costates
-        # and, with a projection, the projected rows' multipliers) set the merit's weight
+        # the model cost's directional derivative along the step (the gaps shrink linearly)
+        # and the largest multiplier estimate (costates and, with a projection, the projected
+        # rows' multipliers), which the l1 merit weight stays above
         slope, lam_max, dx_max, du_max = self._step_stats(
             q["lx"], q["lu"], q["lxN"], bw.s, bw.S, bw.Qu, bw.Quu, bw.Qux, dX, dU,
             None if proj is None else proj.pinv)
