@@ -40,6 +40,7 @@ __all__ = [
     "arch_flags",
     "codegen_enabled",
     "compile_function",
+    "compiled_library",
     "default_cache_dir",
     "forget_loaded",
     "function_name",
@@ -199,6 +200,16 @@ def compile_function(
     compiled = ca.external(fn.name(), str(lib))
     _LOADED[str(lib)] = compiled
     return compiled
+
+
+def compiled_library(fn: ca.Function) -> Path | None:
+    """The shared library behind ``fn`` when :func:`compile_function` returned it (in this
+    process), else None. Its C entry points are CasADi's interface of generated code:
+    ``<fn.name()>(arg, res, iw, w, mem)`` and ``<fn.name()>_work`` for the array sizes."""
+    for path, loaded in _LOADED.items():
+        if loaded is fn:
+            return Path(path)
+    return None
 
 
 def forget_loaded() -> None:

@@ -50,6 +50,8 @@ __all__ = ["AbPattern", "AlRowsKernel", "available", "backward_pass_c", "library
 _log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("riccati.c")
+# compiled into the same library: one evaluation of the problem (evaluation.py binds it)
+SOURCES = (SOURCE, Path(__file__).with_name("evaluation.c"))
 # Plain optimisation only: no -march/-mavx2 (the cache may be shared by different CPUs; the
 # source dispatches to AVX2 itself) and no -ffast-math (NaN and inf must propagate as in
 # numpy, the caller's regularisation loop depends on it).
@@ -81,24 +83,26 @@ def _key(source: bytes) -> str:
 
 def library_path() -> Path:
     """Where the compiled library of the current source lives (it may not exist yet)."""
-    return codegen.default_cache_dir() / f"riccati_{_key(SOURCE.read_bytes())}.so"
+    text = b"\0".join(path.read_bytes() for path in SOURCES)
+    return codegen.default_cache_dir() / f"riccati_{_key(text)}.so"
 
 
 def _build(lib: Path) -> None:
-    """Compile riccati.c to ``lib`` (under a temporary name, then an atomic rename)."""
+    """Compile the sources to ``lib`` (under a temporary name, then an atomic rename)."""
     lib.parent.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix=".build_riccati_", dir=lib.parent))
     try:
         tmp = work / lib.name
-        cmd = [codegen.CC, *FLAGS, str(SOURCE), "-o", str(tmp), "-lm"]
-        _log.info("compiling %s ...", SOURCE.name)
+        cmd = [codegen.CC, *FLAGS, *map(str, SOURCES), "-o", str(tmp), "-lm"]
+        _log.info("compiling %s ...", ", ".join(path.name for path in SOURCES))
         start = time.perf_counter()
         res = subprocess.run(cmd, capture_output=True, text=True, check=False)
         if res.returncode != 0:
-            raise RuntimeError(f"compiling {SOURCE} failed ({' '.join(cmd)}):\n"
+            raise RuntimeError(f"compiling {SOURCE.parent} failed ({' '.join(cmd)}):\n"
                                f"{res.stderr[-2000:]}")
         os.replace(tmp, lib)
-        _log.info("compiled %s in %.1f s -> %s", SOURCE.name, time.perf_counter() - start, lib)
+        _log.info("compiled the Riccati library in %.1f s -> %s", time.perf_counter() - start,
+                  lib)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

@@ -27,12 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from horizon_mpc.codegen import BufferedFunction
+from horizon_mpc.codegen import BufferedFunction, codegen_enabled, compile_function
 from horizon_mpc.problem import Problem
 from horizon_mpc.problem.terms import stacked_bounds, stacked_weights
 from horizon_mpc.solvers.base import Solver
 from horizon_mpc.solvers.ilqr import merit, riccati, riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
+from horizon_mpc.solvers.ilqr.evaluation import CompiledEvaluation
 from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian
 from horizon_mpc.solvers.ilqr.stages import build_stage_model
 
@@ -130,7 +131,10 @@ class IlqrSolver(Solver):
         self._uses_input = np.concatenate(
             [np.full(c.dim, bool(c.uses_input)) for c in m.stage_cons] or [np.zeros(0, bool)])
         self.mu = self.opts["mu_init"]
-        self._difference = BufferedFunction(prb.state_difference())
+        difference = prb.state_difference()
+        if self.opts["codegen"] and codegen_enabled():
+            difference = compile_function(difference)
+        self._difference = BufferedFunction(difference)
         # numpy in/out through preallocated buffers (no DM conversion); outputs are views
         # overwritten by the next call of the same function
         self._values = BufferedFunction(m.values)
@@ -143,7 +147,14 @@ class IlqrSolver(Solver):
         # dynamics Jacobians (go2 walking: 5 % of [A | B]) by their pattern
         self._ab_pattern: riccati_c.AbPattern | None = None  # also read by the projection
         self._step_stats = merit.step_stats
+        # a whole evaluation in one compiled call when the value functions are compiled
+        self._compiled_eval: CompiledEvaluation | None = None
         if self.opts["codegen"] and riccati_c.available():
+            self._compiled_eval = CompiledEvaluation.create(
+                m.values, m.values_term, difference,
+                {"N": N, "nx": m.nx, "ndx": m.ndx, "nu": m.nu, "nr": m.nr, "nc": m.nc,
+                 "ncon": m.nc_con, "nrN": m.nrN, "ncN": m.ncN, "ncNcon": m.ncN_con,
+                 "npar": prb.np_}, self._al, self._alN)
             self._backward, self._rollout = riccati_c.backward_pass_c, riccati_c.linear_rollout_c
             self._step_stats = riccati_c.step_stats_c
             pattern = None if m.ab_pattern is None else riccati_c.AbPattern.from_mask(
@@ -207,6 +218,10 @@ class IlqrSolver(Solver):
             (N, 0))  # (N, nr)
         self.WrN = stacked_weights(m.term_costs)[:, N:].T if m.term_costs else np.zeros(
             (1, 0))  # (1, nrN)
+        if self._compiled_eval is not None:
+            lay = self._layout
+            self._compiled_eval.set_problem(self.S, self.P, self.Wr, self.WrN[0], lay.b,
+                                            self._eq_rows, lay.bN, lay.term)
 
     def _choose_quadratisation(self, lb: np.ndarray, ub: np.ndarray) -> None:
         """The lean quadratisation (no AL terms for the projected equalities) unless a row it
@@ -227,6 +242,17 @@ class IlqrSolver(Solver):
     def _evaluate(self, X: np.ndarray, U: np.ndarray) -> dict[str, Any] | None:
         """Defects, residuals and constraints at (X, U); None if anything is not finite."""
         m, N = self.model, self.model.n_nodes
+        ce = self._compiled_eval
+        if ce is not None:
+            ce.set_initial_state(self.x_init)
+            stats = ce(np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(U, dtype=float))
+            if stats is None:
+                return None
+            cost, gap_l1, gap_max, eq_l1, eq_max, al, al_viol = stats
+            return {"gap": ce.gap.copy(), "r": ce.r.copy(), "c": ce.c.copy(),
+                    "rN": ce.rN.reshape(1, m.nrN).copy(), "cN": ce.cN.reshape(1, m.ncN).copy(),
+                    "d0": ce.d0.copy(), "eq_l1": eq_l1, "cost": cost, "al": al,
+                    "gap_l1": gap_l1, "viol": max(gap_max, eq_max, al_viol)}
         gap, r, c = self._values(X[:N].T, U.T, self.S, self.P[:, :N], X[1:].T)
         rN, cN = self._values_term(X[N], self.S, self.P[:, N])
         gap, r, c = gap.T.copy(), r.T.copy(), c.T.copy()  # (N, ndx), (N, nr), (N, nc)

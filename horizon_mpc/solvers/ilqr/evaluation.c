@@ -1,0 +1,163 @@
+/*
+ * One evaluation of the ILQR's problem in one call: the CasADi-generated value functions
+ * called through their C entry points, then the scalar terms the line search reads.
+ *
+ * What IlqrSolver._evaluate does with numpy (values, values_term, state difference,
+ * merit.evaluation_stats, AugmentedLagrangian.value_and_violation), without its ~40 numpy
+ * and CasADi calls per evaluation from Python. evaluation.py binds it with ctypes;
+ * riccati_c.py compiles this file with riccati.c into one library (riccati_al_rows, the
+ * augmented-Lagrangian rows, comes from there).
+ *
+ * Generated functions use CasADi's C interface (the one its code generator documents):
+ * f(arg, res, iw, w, mem) with caller-owned argument, result and work arrays sized by
+ * f_work(). A null argument reads as zeros; a null result is not computed.
+ */
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+
+typedef long long casadi_int_t; /* casadi_int of the generated code (the binder checks it) */
+typedef int (*generated_entry)(const double **arg, double **res, casadi_int_t *iw, double *w,
+                               int mem);
+
+/* a generated function with its arrays (arg and res have f_work()'s sizes, >= n_in, n_out) */
+typedef struct {
+    generated_entry f;
+    const double **arg;
+    double **res;
+    casadi_int_t *iw;
+    double *w;
+} generated_fn;
+
+/* the augmented-Lagrangian rows of one block: n doubles each */
+typedef struct {
+    int n;
+    const double *lb, *ub, *lam, *lam_lo, *lam_up, *rho;
+} al_block;
+
+/*
+ * What an evaluation reads besides the trajectory. Row-major arrays:
+ *  S (ns) the fixed single variables; P (N+1, npar) the parameters node by node;
+ *  x_init (nx) node 0's fixed state or NULL (free); W (N, nr), WN (nrN) residual weights;
+ *  b, eq (N, ncon) the projected rows' targets and mask (eq: 0/1), bN, eqN (ncNcon).
+ */
+typedef struct {
+    int N, nx, ndx, nr, nc, ncon, nrN, ncN, ncNcon, npar;
+    int barrier;
+    double mu, delta;
+    generated_fn values;      /* (x, u, s, p, x_next) -> (gap, r, c), mapped over N nodes */
+    generated_fn values_term; /* (x, s, p) -> (r, c) of node N */
+    generated_fn difference;  /* (x0, x1) -> dx */
+    const double *S, *P, *x_init, *W, *WN, *b, *bN;
+    const uint8_t *eq, *eqN;
+    al_block al, alN;
+} evaluation_data;
+
+/* evaluation outputs, row-major: gap (N, ndx), r (N, nr), c (N, nc), rN (nrN), cN (ncN), d0 */
+typedef struct {
+    double *gap, *r, *c, *rN, *cN, *d0;
+} evaluation_out;
+
+enum { EV_COST, EV_GAP_L1, EV_GAP_MAX, EV_EQ_L1, EV_EQ_MAX, EV_AL, EV_AL_VIOL, N_EV };
+
+void riccati_al_rows(int n, const double *c, const double *lb, const double *ub,
+                     const double *lam, const double *lam_lo, const double *lam_up,
+                     const double *rho, int barrier, double mu, double delta, double *w,
+                     double *t, double *viol, double *sums);
+
+static int call(const generated_fn *g, const double *a0, const double *a1, const double *a2,
+                const double *a3, const double *a4, double *r0, double *r1, double *r2)
+{
+    g->arg[0] = a0;
+    g->arg[1] = a1;
+    g->arg[2] = a2;
+    g->arg[3] = a3;
+    g->arg[4] = a4;
+    g->res[0] = r0;
+    g->res[1] = r1;
+    g->res[2] = r2;
+    return g->f(g->arg, g->res, g->iw, g->w, 0);
+}
+
+static int all_finite(const double *x, size_t n)
+{
+    double s = 0.0; /* NaN and inf propagate through a sum */
+    for (size_t i = 0; i < n; i++) s += x[i] * 0.0;
+    return s == 0.0;
+}
+
+static void abs_sum_max(const double *x, size_t n, double *sum, double *max)
+{
+    for (size_t i = 0; i < n; i++) {
+        double a = fabs(x[i]);
+        *sum += a;
+        if (a > *max) *max = a;
+    }
+}
+
+/*
+ * Evaluate the problem at X (N+1, nx), U (N, nu) (row-major). Writes `o`'s arrays and
+ * stats[N_EV]: cost (sum W r^2 + sum WN rN^2), gap_l1 / gap_max (|gap| and |d0|),
+ * eq_l1 / eq_max (|c - b| over the projected rows), al (the augmented-Lagrangian terms of
+ * both blocks), al_viol (their largest bound violation).
+ * Returns 0; 1 when a value is not finite (stats not written); 2 when a generated
+ * function reports a failure.
+ */
+int ilqr_evaluate(const evaluation_data *d, const double *X, const double *U,
+                  const evaluation_out *o, double *stats)
+{
+    const int N = d->N, nx = d->nx, ndx = d->ndx;
+    if (call(&d->values, X, U, d->S, d->P, X + nx, o->gap, o->r, o->c)) return 2;
+    if (call(&d->values_term, X + (size_t)N * nx, d->S, d->P + (size_t)N * d->npar, NULL, NULL,
+             o->rN, o->cN, NULL))
+        return 2;
+    if (d->x_init) {
+        if (call(&d->difference, X, d->x_init, NULL, NULL, NULL, o->d0, NULL, NULL)) return 2;
+    } else {
+        for (int i = 0; i < ndx; i++) o->d0[i] = 0.0;
+    }
+    if (!all_finite(o->gap, (size_t)N * ndx) || !all_finite(o->r, (size_t)N * d->nr)
+        || !all_finite(o->c, (size_t)N * d->nc) || !all_finite(o->rN, d->nrN)
+        || !all_finite(o->cN, d->ncN) || !all_finite(o->d0, ndx))
+        return 1;
+
+    double cost = 0.0;
+    for (size_t i = 0; i < (size_t)N * d->nr; i++) cost += d->W[i] * o->r[i] * o->r[i];
+    for (int i = 0; i < d->nrN; i++) cost += d->WN[i] * o->rN[i] * o->rN[i];
+
+    double gap_l1 = 0.0, gap_max = 0.0, eq_l1 = 0.0, eq_max = 0.0;
+    abs_sum_max(o->gap, (size_t)N * ndx, &gap_l1, &gap_max);
+    abs_sum_max(o->d0, ndx, &gap_l1, &gap_max);
+    for (int k = 0; k < N; k++) {
+        const double *ck = o->c + (size_t)k * d->nc, *bk = d->b + (size_t)k * d->ncon;
+        const uint8_t *ek = d->eq + (size_t)k * d->ncon;
+        for (int i = 0; i < d->ncon; i++) {
+            if (!ek[i]) continue;
+            double e = fabs(ck[i] - bk[i]);
+            eq_l1 += e;
+            if (e > eq_max) eq_max = e;
+        }
+    }
+    for (int i = 0; i < d->ncNcon; i++) {
+        if (!d->eqN[i]) continue;
+        double e = fabs(o->cN[i] - d->bN[i]);
+        eq_l1 += e;
+        if (e > eq_max) eq_max = e;
+    }
+
+    double sums[2], sumsN[2];
+    const al_block *a = &d->al, *aN = &d->alN;
+    riccati_al_rows(a->n, o->c, a->lb, a->ub, a->lam, a->lam_lo, a->lam_up, a->rho, d->barrier,
+                    d->mu, d->delta, NULL, NULL, NULL, sums);
+    riccati_al_rows(aN->n, o->cN, aN->lb, aN->ub, aN->lam, aN->lam_lo, aN->lam_up, aN->rho,
+                    d->barrier, d->mu, d->delta, NULL, NULL, NULL, sumsN);
+
+    stats[EV_COST] = cost;
+    stats[EV_GAP_L1] = gap_l1;
+    stats[EV_GAP_MAX] = gap_max;
+    stats[EV_EQ_L1] = eq_l1;
+    stats[EV_EQ_MAX] = eq_max;
+    stats[EV_AL] = sums[0] + sumsN[0];
+    stats[EV_AL_VIOL] = sums[1] > sumsN[1] ? sums[1] : sumsN[1];
+    return 0;
+}

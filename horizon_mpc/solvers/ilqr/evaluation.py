@@ -1,0 +1,218 @@
+"""One evaluation of the ILQR's problem in one compiled call (``evaluation.c``).
+
+:class:`CompiledEvaluation` does what ``IlqrSolver._evaluate`` does with numpy (the value
+functions of the stage model, the state difference at node 0, ``merit.evaluation_stats``
+and ``AugmentedLagrangian.value_and_violation`` of both row blocks), with the C code
+calling the CasADi-generated functions directly through their C entry points: one ctypes
+call instead of ~40 numpy and CasADi calls (~0.2 ms of Python per evaluation on go2's
+walking problem, two to three evaluations per MPC tick).
+
+It needs the value functions compiled by :func:`horizon_mpc.codegen.compile_function`
+(their libraries are where the entry points come from) and the compiled Riccati library;
+:func:`CompiledEvaluation.create` returns None otherwise and the solver keeps numpy.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from horizon_mpc import codegen
+from horizon_mpc.solvers.ilqr import riccati_c
+from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian
+
+__all__ = ["CompiledEvaluation", "GeneratedFunction"]
+
+log = logging.getLogger(__name__)
+
+_p, _i, _d = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
+
+
+class GeneratedFunction(ctypes.Structure):
+    """A CasADi-generated function's C entry point with its argument, result and work
+    arrays (``generated_fn`` of evaluation.c). Build it with :meth:`bind`."""
+
+    _fields_ = [("f", _p), ("arg", ctypes.POINTER(_p)), ("res", ctypes.POINTER(_p)),
+                ("iw", _p), ("w", _p)]
+
+    @classmethod
+    def bind(cls, fn: ca.Function) -> GeneratedFunction:
+        """The entry point of ``fn``, a Function from ``codegen.compile_function``.
+
+        Raises:
+            RuntimeError: ``fn`` is not backed by a library of ``compile_function`` (e.g.
+                ``HORIZON_MPC_NO_CODEGEN``) or the library's integer or real types are
+                not 64-bit.
+        """
+        path = codegen.compiled_library(fn)
+        if path is None:
+            raise RuntimeError(f"{fn.name()} is not a compiled function (compile_function)")
+        lib = ctypes.CDLL(str(path))
+        name = fn.name()
+        for kind in ("int", "real"):
+            size_fn = getattr(lib, f"{name}_casadi_{kind}_size")
+            size_fn.restype = _i
+            if size_fn() != 8:
+                raise RuntimeError(f"{Path(path).name}: casadi_{kind} is not 64-bit")
+        sizes = (ctypes.c_longlong * 4)()
+        work = getattr(lib, f"{name}_work")
+        work.restype = _i
+        if work(*(ctypes.byref(sizes, 8 * i) for i in range(4))) != 0:
+            raise RuntimeError(f"{name}_work failed")
+        n_arg = max(int(sizes[0]), fn.n_in(), 5)  # evaluation.c sets 5 arguments, 3 results
+        n_res = max(int(sizes[1]), fn.n_out(), 3)
+        arg, res = (_p * n_arg)(), (_p * n_res)()
+        iw = np.zeros(max(int(sizes[2]), 1), np.int64)
+        w = np.zeros(max(int(sizes[3]), 1))
+        out = cls(ctypes.cast(getattr(lib, name), _p), ctypes.cast(arg, ctypes.POINTER(_p)),
+                  ctypes.cast(res, ctypes.POINTER(_p)), iw.ctypes.data, w.ctypes.data)
+        out._keep = (lib, arg, res, iw, w)  # the arrays the pointers point into
+        return out
+
+
+class _AlBlock(ctypes.Structure):
+    _fields_ = [("n", _i), ("lb", _p), ("ub", _p), ("lam", _p), ("lam_lo", _p),
+                ("lam_up", _p), ("rho", _p)]
+
+
+class _Data(ctypes.Structure):  # evaluation_data of evaluation.c
+    _fields_ = [*((name, _i) for name in ("N", "nx", "ndx", "nr", "nc", "ncon", "nrN", "ncN",
+                                          "ncNcon", "npar", "barrier")),
+                ("mu", _d), ("delta", _d), ("values", GeneratedFunction),
+                ("values_term", GeneratedFunction), ("difference", GeneratedFunction),
+                *((name, _p) for name in ("S", "P", "x_init", "W", "WN", "b", "bN", "eq",
+                                          "eqN")),
+                ("al", _AlBlock), ("alN", _AlBlock)]
+
+
+class _Out(ctypes.Structure):  # evaluation_out of evaluation.c
+    _fields_ = [(name, _p) for name in ("gap", "r", "c", "rN", "cN", "d0")]
+
+
+def _bind_library() -> ctypes.CDLL:
+    lib = riccati_c._load()
+    if not getattr(lib, "_evaluation_bound", False):
+        lib.ilqr_evaluate.argtypes = [ctypes.POINTER(_Data), _p, _p, ctypes.POINTER(_Out), _p]
+        lib.ilqr_evaluate.restype = _i
+        lib._evaluation_bound = True
+    return lib
+
+
+def _f64(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    if a.shape != shape:
+        raise ValueError(f"array of shape {a.shape}; expected {shape}")
+    return a
+
+
+class CompiledEvaluation:
+    """``IlqrSolver._evaluate`` in one compiled call; see the module docstring.
+
+    Outputs (row-major, overwritten by each call): ``gap`` (N, ndx), ``r`` (N, nr), ``c``
+    (N, nc), ``rN`` (nrN,), ``cN`` (ncN,), ``d0`` (ndx,). The problem data are set with
+    :meth:`set_problem` (after the solver reads the problem) and :meth:`set_initial_state`.
+    """
+
+    def __init__(self, values: ca.Function, values_term: ca.Function,
+                 difference: ca.Function, sizes: dict[str, int], al: AugmentedLagrangian,
+                 alN: AugmentedLagrangian):
+        self._lib = _bind_library()
+        self._fns = tuple(GeneratedFunction.bind(f) for f in (values, values_term, difference))
+        s = sizes
+        self.N, self.nx, self.nu = s["N"], s["nx"], s["nu"]
+        d = self._data = _Data()
+        for name in ("N", "nx", "ndx", "nr", "nc", "ncon", "nrN", "ncN", "ncNcon", "npar"):
+            setattr(d, name, int(s[name]))
+        d.values, d.values_term, d.difference = self._fns
+        self.gap, self.r = np.zeros((s["N"], s["ndx"])), np.zeros((s["N"], s["nr"]))
+        self.c = np.zeros((s["N"], s["nc"]))
+        self.rN, self.cN, self.d0 = np.zeros(s["nrN"]), np.zeros(s["ncN"]), np.zeros(s["ndx"])
+        self._out = _Out(*(a.ctypes.data for a in (self.gap, self.r, self.c, self.rN, self.cN,
+                                                    self.d0)))
+        self._stats = np.zeros(7)
+        self._x_init = np.zeros(s["nx"])
+        self._x_init_set: np.ndarray | None = None
+        self._al = (al, alN)
+        self._keep: tuple = ()
+        self._data_ptr, self._out_ptr = ctypes.pointer(d), ctypes.pointer(self._out)
+        self._stats_ptr = self._stats.ctypes.data
+
+    @classmethod
+    def create(cls, *args, **kwargs) -> CompiledEvaluation | None:
+        """An instance, or None (with the reason logged at debug level) when the value
+        functions are not compiled or the compiled library is unavailable."""
+        if not riccati_c.available():
+            return None
+        try:
+            return cls(*args, **kwargs)
+        except (RuntimeError, OSError, AttributeError) as err:
+            log.debug("compiled evaluation unavailable: %s", err)
+            return None
+
+    def set_problem(self, S: np.ndarray, P: np.ndarray, W: np.ndarray, WN: np.ndarray,
+                    b: np.ndarray, eq: np.ndarray, bN: np.ndarray, eqN: np.ndarray) -> None:
+        """The data of the next evaluations: S (ns,) singles, P (npar, N+1) parameters,
+        W (N, nr) and WN (nrN,) residual weights, b and eq (N, ncon) the projected rows'
+        targets and mask, bN and eqN (ncNcon,) the terminal ones; the augmented Lagrangians'
+        current bounds, multipliers and penalties are read too."""
+        d, N = self._data, self.N
+        P = np.ascontiguousarray(np.asarray(P, dtype=np.float64).T)  # node by node
+        if P.shape != (N + 1, d.npar):
+            raise ValueError(f"P has shape {P.T.shape}; expected ({d.npar}, {N + 1})")
+        S = np.ascontiguousarray(S, dtype=np.float64).reshape(-1)
+        W, WN = _f64(W, (N, d.nr)), _f64(WN, (d.nrN,))
+        b, bN = _f64(b, (N, d.ncon)), _f64(bN, (d.ncNcon,))
+        eq = np.ascontiguousarray(eq, dtype=bool).view(np.uint8)
+        eqN = np.ascontiguousarray(eqN, dtype=bool).view(np.uint8)
+        if eq.shape != (N, d.ncon) or eqN.shape != (d.ncNcon,):
+            raise ValueError(f"eq / eqN have shapes {eq.shape} / {eqN.shape}")
+        self._keep = (S, P, W, WN, b, bN, eq, eqN)
+        d.S, d.P, d.W, d.WN, d.b, d.bN, d.eq, d.eqN = (
+            a.ctypes.data if a.size else None for a in self._keep)
+        al, alN = self._al
+        d.barrier, d.mu, d.delta = int(al.barrier), al.mu, al.delta
+        for block, a in ((d.al, al), (d.alN, alN)):
+            arrays = (a.lb, a.ub, a.lam, a.lam_lo, a.lam_up, a.rho)
+            if any(not x.flags.c_contiguous or x.dtype != np.float64 for x in arrays):
+                raise ValueError("the augmented Lagrangian's arrays must be C-contiguous float64")
+            block.n = a.lam.size
+            block.lb, block.ub, block.lam, block.lam_lo, block.lam_up, block.rho = (
+                x.ctypes.data for x in arrays)
+        self._al_arrays = tuple((a.lb, a.ub, a.lam, a.lam_lo, a.lam_up, a.rho)
+                                for a in self._al)
+
+    def set_initial_state(self, x_init: np.ndarray | None) -> None:
+        """Node 0's fixed state (nx,), or None (free: d0 is zero)."""
+        if x_init is self._x_init_set:
+            return
+        self._x_init_set = x_init
+        if x_init is None:
+            self._data.x_init = None
+            return
+        self._x_init[:] = x_init
+        self._data.x_init = self._x_init.ctypes.data
+
+    def __call__(self, X: np.ndarray, U: np.ndarray) -> tuple[float, ...] | None:
+        """Evaluate at X (N+1, nx), U (N, nu) (C-contiguous float64): ``(cost, gap_l1,
+        gap_max, eq_l1, eq_max, al, al_viol)``, or None when a value is not finite.
+
+        Raises:
+            RuntimeError: a generated function reported a failure.
+            ValueError: X or U has the wrong shape or layout.
+        """
+        if (X.shape != (self.N + 1, self.nx) or U.shape != (self.N, self.nu)
+                or not (X.flags.c_contiguous and U.flags.c_contiguous)
+                or X.dtype != np.float64 or U.dtype != np.float64):
+            raise ValueError(f"X {X.shape} and U {U.shape} must be C-contiguous float64 of "
+                             f"shapes {(self.N + 1, self.nx)}, {(self.N, self.nu)}")
+        ret = self._lib.ilqr_evaluate(self._data_ptr, X.ctypes.data, U.ctypes.data,
+                                      self._out_ptr, self._stats_ptr)
+        if ret == 1:
+            return None
+        if ret != 0:
+            raise RuntimeError("ilqr_evaluate: a generated value function failed")
+        return tuple(self._stats.tolist())
