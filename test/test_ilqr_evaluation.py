@@ -1,6 +1,6 @@
-"""The compiled evaluation (evaluation.c: the generated value functions called from C, the
-merit terms and the augmented-Lagrangian rows in one call) returns what the numpy
-evaluation of the ILQR does."""
+"""The compiled evaluation and quadratisation (evaluation.c: the generated functions called
+from C, the merit terms and the augmented-Lagrangian rows in one call each) return what
+the numpy evaluation and quadratisation of the ILQR do."""
 
 from __future__ import annotations
 
@@ -31,6 +31,21 @@ def _both(solver, X, U):
     return a, b
 
 
+def _both_quadratised(solver, X, U):
+    """(compiled, numpy) quadratisations of ``solver`` at (X, U), copied."""
+    compiled = solver._compiled_eval
+    ev = solver._evaluate(X, U)
+    out = []
+    for use in (compiled, None):
+        solver._compiled_eval = use
+        try:
+            q = solver._quadratise(X, U, ev)
+        finally:
+            solver._compiled_eval = compiled
+        out.append(None if q is None else {k: np.array(v) for k, v in q.items()})
+    return out
+
+
 def _assert_same(a, b):
     assert a.keys() == b.keys()
     for key in a:
@@ -53,6 +68,9 @@ def test_the_compiled_evaluation_matches_numpy_on_a_bounded_ocp(mode):
     a, b = _both(solver, X, U)
     _assert_same(a, b)
     assert a["al"] != 0.0 and a["viol"] > 0.0  # the bound and final rows are in play
+    qa, qb = _both_quadratised(solver, X, U)
+    _assert_same(qa, qb)
+    assert np.any(qa["luu"] != 0.0)
 
 
 def test_the_compiled_evaluation_matches_numpy_with_a_free_initial_state():
@@ -81,6 +99,18 @@ def test_the_compiled_evaluation_matches_numpy_on_the_walking_problem():
     assert solver._layout.any
     _assert_same(a, b)
     assert a["eq_l1"] > 0.0
+    qa, qb = _both_quadratised(solver, X, U)
+    assert {"cx", "cu", "cxN"} <= qa.keys()
+    _assert_same(qa, qb)
+    # a projected row's bounds made an inequality: the full quadratisation takes over
+    row = int(np.flatnonzero(solver._eq_rows.any(axis=0))[0])
+    lb = np.full(solver.model.nc_con, -np.inf)
+    lb[row] = -1.0
+    solver._choose_quadratisation(np.tile(lb, (solver.model.n_nodes, 1)),
+                                  np.full((solver.model.n_nodes, solver.model.nc_con), np.inf))
+    assert solver._quadratise_fn is solver._quadratise_all
+    qa, qb = _both_quadratised(solver, X, U)
+    _assert_same(qa, qb)
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
@@ -92,6 +122,20 @@ def test_a_value_that_is_not_finite_fails_the_compiled_evaluation(bad):
     U[4, 0] = bad
     a, b = _both(solver, X, U)
     assert a is None and b is None
+
+
+def test_a_quadratisation_that_is_not_finite_is_refused_by_both():
+    # sqrt(x) has an infinite derivative at 0: finite values, an infinite Jacobian
+    prb = pendulum_swing_up(u_max=3.0, n_nodes=8)
+    x = prb.get_variable("x")
+    prb.create_cost("root", cs.sqrt(x[0]), weight=1.0)
+    solver = make_solver("ilqr", prb, {"max_iter": 1})
+    solver._begin_call()
+    X, U = solver.X.copy(), solver.U.copy()
+    X[:, 0] = 1.0
+    X[3, 0] = 0.0
+    qa, qb = _both_quadratised(solver, X, U)
+    assert qa is None and qb is None
 
 
 def test_only_functions_of_the_code_generator_bind():

@@ -1,11 +1,14 @@
-"""One evaluation of the ILQR's problem in one compiled call (``evaluation.c``).
+"""The ILQR's evaluation and quadratisation of its problem, each in one compiled call
+(``evaluation.c``).
 
 :class:`CompiledEvaluation` does what ``IlqrSolver._evaluate`` does with numpy (the value
 functions of the stage model, the state difference at node 0, ``merit.evaluation_stats``
-and ``AugmentedLagrangian.value_and_violation`` of both row blocks), with the C code
-calling the CasADi-generated functions directly through their C entry points: one ctypes
-call instead of ~40 numpy and CasADi calls (~0.2 ms of Python per evaluation on go2's
-walking problem, two to three evaluations per MPC tick).
+and ``AugmentedLagrangian.value_and_violation`` of both row blocks) and what
+``IlqrSolver._quadratise`` does (the rows' Gauss-Newton weights and targets, the
+quadratisation functions, the finiteness test of their outputs), with the C code calling
+the CasADi-generated functions directly through their C entry points: one ctypes call
+instead of ~40 numpy and CasADi calls (~0.2 ms of Python per evaluation on go2's walking
+problem, two to three evaluations per MPC tick).
 
 It needs the value functions compiled by :func:`horizon_mpc.codegen.compile_function`
 (their libraries are where the entry points come from) and the compiled Riccati library;
@@ -93,11 +96,36 @@ class _Out(ctypes.Structure):  # evaluation_out of evaluation.c
     _fields_ = [(name, _p) for name in ("gap", "r", "c", "rN", "cN", "d0")]
 
 
+class _Quadratise(ctypes.Structure):  # quadratise_data of evaluation.c
+    _fields_ = [("stage", GeneratedFunction), ("term", GeneratedFunction), ("w", _p),
+                ("t", _p), ("wN", _p), ("tN", _p), ("out", _p * 9), ("out_term", _p * 3),
+                ("buffer", _p), ("n_buffer", ctypes.c_size_t)]
+
+
+def _output_views(buffer: np.ndarray, fns: tuple[ca.Function, ...]) -> list[list[np.ndarray]]:
+    """The outputs of ``fns`` as consecutive blocks of ``buffer``, each shaped as the
+    Function's output (column-major, as ``BufferedFunction.outputs``)."""
+    views, pos = [], 0
+    for fn in fns:
+        out = []
+        for i in range(fn.n_out()):
+            n = fn.numel_out(i)
+            out.append(buffer[pos:pos + n].reshape(fn.size_out(i), order="F"))
+            pos += n
+        views.append(out)
+    if pos != buffer.size:
+        raise ValueError("output buffer of the wrong size")
+    return views
+
+
 def _bind_library() -> ctypes.CDLL:
     lib = riccati_c._load()
     if not getattr(lib, "_evaluation_bound", False):
         lib.ilqr_evaluate.argtypes = [ctypes.POINTER(_Data), _p, _p, ctypes.POINTER(_Out), _p]
         lib.ilqr_evaluate.restype = _i
+        lib.ilqr_quadratise.argtypes = [ctypes.POINTER(_Data), ctypes.POINTER(_Quadratise),
+                                        _p, _p, _p, _p]
+        lib.ilqr_quadratise.restype = _i
         lib._evaluation_bound = True
     return lib
 
@@ -110,16 +138,21 @@ def _f64(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
 
 
 class CompiledEvaluation:
-    """``IlqrSolver._evaluate`` in one compiled call; see the module docstring.
+    """``IlqrSolver._evaluate`` and ``_quadratise`` in one compiled call each; see the
+    module docstring.
 
-    Outputs (row-major, overwritten by each call): ``gap`` (N, ndx), ``r`` (N, nr), ``c``
-    (N, nc), ``rN`` (nrN,), ``cN`` (ncN,), ``d0`` (ndx,). The problem data are set with
-    :meth:`set_problem` (after the solver reads the problem) and :meth:`set_initial_state`.
+    Evaluation outputs (row-major, overwritten by each call): ``gap`` (N, ndx), ``r``
+    (N, nr), ``c`` (N, nc), ``rN`` (nrN,), ``cN`` (ncN,), ``d0`` (ndx,); quadratisation
+    outputs: ``quadratisation`` and ``quadratisation_term``, the outputs of the stage and
+    terminal functions shaped as theirs (as ``BufferedFunction.outputs``), in one flat
+    ``quadratisation_buffer``. The problem data are set with :meth:`set_problem` (after the
+    solver reads the problem) and :meth:`set_initial_state`.
     """
 
     def __init__(self, values: ca.Function, values_term: ca.Function,
-                 difference: ca.Function, sizes: dict[str, int], al: AugmentedLagrangian,
-                 alN: AugmentedLagrangian):
+                 difference: ca.Function, quadratise: ca.Function,
+                 quadratise_term: ca.Function, sizes: dict[str, int],
+                 al: AugmentedLagrangian, alN: AugmentedLagrangian):
         self._lib = _bind_library()
         self._fns = tuple(GeneratedFunction.bind(f) for f in (values, values_term, difference))
         s = sizes
@@ -140,6 +173,28 @@ class CompiledEvaluation:
         self._keep: tuple = ()
         self._data_ptr, self._out_ptr = ctypes.pointer(d), ctypes.pointer(self._out)
         self._stats_ptr = self._stats.ctypes.data
+        # the quadratisation: AL weights and targets, one buffer for every output
+        q = self._quad = _Quadratise()
+        self._wt = (np.zeros((s["N"], s["nc"])), np.zeros((s["N"], s["nc"])),
+                    np.zeros(s["ncN"]), np.zeros(s["ncN"]))
+        q.w, q.t, q.wN, q.tN = (a.ctypes.data for a in self._wt)
+        n_out = sum(f.numel_out(i) for f in (quadratise, quadratise_term)
+                    for i in range(f.n_out()))
+        self.quadratisation_buffer = np.zeros(n_out)
+        self.quadratisation, self.quadratisation_term = _output_views(
+            self.quadratisation_buffer, (quadratise, quadratise_term))
+        if len(self.quadratisation) != 9 or len(self.quadratisation_term) != 3:
+            raise ValueError("the quadratisation functions have 9 and 3 outputs")
+        for j, a in enumerate(self.quadratisation):
+            q.out[j] = a.ctypes.data
+        for j, a in enumerate(self.quadratisation_term):
+            q.out_term[j] = a.ctypes.data
+        q.buffer, q.n_buffer = self.quadratisation_buffer.ctypes.data, n_out
+        q.term = GeneratedFunction.bind(quadratise_term)
+        self._stage_fns: dict[int, tuple[ca.Function, GeneratedFunction]] = {}
+        self._stage_shapes = [quadratise.size_out(i) for i in range(9)]
+        self.set_stage_quadratisation(quadratise)
+        self._quad_ptr = ctypes.pointer(q)
 
     @classmethod
     def create(cls, *args, **kwargs) -> CompiledEvaluation | None:
@@ -152,6 +207,16 @@ class CompiledEvaluation:
         except (RuntimeError, OSError, AttributeError) as err:
             log.debug("compiled evaluation unavailable: %s", err)
             return None
+
+    def set_stage_quadratisation(self, fn: ca.Function) -> None:
+        """Quadratise with this stage function from now on (the solver's lean or full one:
+        the same inputs and output shapes)."""
+        if [fn.size_out(i) for i in range(fn.n_out())] != self._stage_shapes:
+            raise ValueError(f"{fn.name()}: outputs unlike the bound quadratisation's")
+        entry = self._stage_fns.get(id(fn))
+        if entry is None:
+            entry = self._stage_fns[id(fn)] = (fn, GeneratedFunction.bind(fn))
+        self._quad.stage = entry[1]
 
     def set_problem(self, S: np.ndarray, P: np.ndarray, W: np.ndarray, WN: np.ndarray,
                     b: np.ndarray, eq: np.ndarray, bN: np.ndarray, eqN: np.ndarray) -> None:
@@ -216,3 +281,25 @@ class CompiledEvaluation:
         if ret != 0:
             raise RuntimeError("ilqr_evaluate: a generated value function failed")
         return tuple(self._stats.tolist())
+
+    def quadratise(self, X: np.ndarray, U: np.ndarray, c: np.ndarray, cN: np.ndarray) -> bool:
+        """Quadratise at X (N+1, nx), U (N, nu) (as :meth:`__call__` takes them) whose
+        evaluation gave the constraint rows c (N, nc), cN (ncN,) (C-contiguous float64):
+        fills ``quadratisation`` and ``quadratisation_term``; False when an output is not
+        finite.
+
+        Raises:
+            RuntimeError: a generated function reported a failure.
+            ValueError: an array has the wrong shape or layout.
+        """
+        d = self._data
+        for name, a, shape in (("X", X, (self.N + 1, self.nx)), ("U", U, (self.N, self.nu)),
+                               ("c", c, (self.N, d.nc)), ("cN", cN, (d.ncN,))):
+            if a.shape != shape or not a.flags.c_contiguous or a.dtype != np.float64:
+                raise ValueError(f"{name} {a.shape} must be C-contiguous float64 of shape "
+                                 f"{shape}")
+        ret = self._lib.ilqr_quadratise(self._data_ptr, self._quad_ptr, X.ctypes.data,
+                                        U.ctypes.data, c.ctypes.data, cN.ctypes.data)
+        if ret == 2:
+            raise RuntimeError("ilqr_quadratise: a generated quadratisation function failed")
+        return ret == 0

@@ -151,7 +151,7 @@ class IlqrSolver(Solver):
         self._compiled_eval: CompiledEvaluation | None = None
         if self.opts["codegen"] and riccati_c.available():
             self._compiled_eval = CompiledEvaluation.create(
-                m.values, m.values_term, difference,
+                m.values, m.values_term, difference, m.quadratise, m.quadratise_term,
                 {"N": N, "nx": m.nx, "ndx": m.ndx, "nu": m.nu, "nr": m.nr, "nc": m.nc,
                  "ncon": m.nc_con, "nrN": m.nrN, "ncN": m.ncN, "ncNcon": m.ncN_con,
                  "npar": prb.np_}, self._al, self._alN)
@@ -230,6 +230,8 @@ class IlqrSolver(Solver):
         needed = (np.isfinite(lb[:, left_out]) | np.isfinite(ub[:, left_out])).any()
         if not needed:
             self._quadratise_fn = self._quadratise_lean
+            if self._compiled_eval is not None:
+                self._compiled_eval.set_stage_quadratisation(self._quadratise_lean.fn)
             return
         if self._quadratise_all is None:
             log.info("ilqr: a constraint row left out of the lean quadratisation (an equality "
@@ -237,6 +239,8 @@ class IlqrSolver(Solver):
                      "building the quadratisation with every row")
             self._quadratise_all = BufferedFunction(self.model.quadratise_full())
         self._quadratise_fn = self._quadratise_all
+        if self._compiled_eval is not None:
+            self._compiled_eval.set_stage_quadratisation(self._quadratise_all.fn)
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate(self, X: np.ndarray, U: np.ndarray) -> dict[str, Any] | None:
@@ -280,15 +284,23 @@ class IlqrSolver(Solver):
 
     def _quadratise(self, X, U, ev):
         m, N = self.model, self.model.n_nodes
-        wc, tc = self._al.weights_targets(ev["c"])
-        wcN, tcN = self._alN.weights_targets(ev["cN"])
-        out = self._quadratise_fn(X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T, tc.T)
-        out_term = self._quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
-                                         tcN.T)
-        # one finiteness test on the outputs (NaN and inf propagate through sums)
-        if not math.isfinite(float(self._quadratise_fn.output_buffer.sum())
-                             + float(self._quadratise_term.output_buffer.sum())):
-            return None
+        ce = self._compiled_eval
+        if ce is not None:
+            if not ce.quadratise(np.ascontiguousarray(X, dtype=float),
+                                 np.ascontiguousarray(U, dtype=float), ev["c"], ev["cN"][0]):
+                return None
+            out, out_term = ce.quadratisation, ce.quadratisation_term
+        else:
+            wc, tc = self._al.weights_targets(ev["c"])
+            wcN, tcN = self._alN.weights_targets(ev["cN"])
+            out = self._quadratise_fn(X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T,
+                                      tc.T)
+            out_term = self._quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
+                                             tcN.T)
+            # one finiteness test on the outputs (NaN and inf propagate through sums)
+            if not math.isfinite(float(self._quadratise_fn.output_buffer.sum())
+                                 + float(self._quadratise_term.output_buffer.sum())):
+                return None
         A, B, lx, lu, lxx, luu, lux, cx, cu = out
         lxN, lxxN, cxN = out_term
         ndx, nu = m.ndx, m.nu
