@@ -36,6 +36,9 @@ from horizon_mpc.problem.variables import (
 
 __all__ = ["Problem"]
 
+# Problem.stacked: what -> the Variable array it reads
+_STACKED_ARRAY = {"initial_guess": "_init", "lower_bounds": "_lb", "upper_bounds": "_ub"}
+
 log = logging.getLogger(__name__)
 
 TRANSCRIPTIONS = ("multiple_shooting", "direct_collocation")
@@ -443,7 +446,7 @@ class Problem:
         """Stacked parameter values, shape (np, N+1)."""
         if not self.parameters:
             return np.zeros((0, self.n_nodes + 1))
-        return np.vstack([p.values for p in self.parameters])
+        return np.vstack([p._init for p in self.parameters])  # vstack copies
 
     def stacked(self, kind: str, what: str = "initial_guess") -> np.ndarray:
         """Stack ``what`` (initial_guess, lower_bounds, upper_bounds) of a variable kind.
@@ -455,7 +458,9 @@ class Problem:
         n = {"state": self.n_nodes + 1, "input": self.n_nodes, "single": 1}[kind]
         if not group:
             return np.zeros((0, n))
-        return np.vstack([getattr(v, what) for v in group])
+        # the variables' own arrays (vstack copies them; the public properties would copy
+        # twice: this runs several times per solve)
+        return np.vstack([getattr(v, _STACKED_ARRAY[what]) for v in group])
 
     def set_stacked_initial_guess(self, kind: str, values: np.ndarray) -> None:
         """Write a stacked array (as from :meth:`stacked`) back into the variables."""

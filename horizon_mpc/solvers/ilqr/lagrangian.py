@@ -107,10 +107,15 @@ class AugmentedLagrangian:
         finite_lb, finite_ub = np.isfinite(lb), np.isfinite(ub)
         eq = finite_lb & (lb == ub)
         has_lo, has_up = finite_lb & ~eq, finite_ub & ~eq
-        if hasattr(self, "eq"):  # a row's kind: equality, lower side, upper side
-            changed = (eq != self.eq) | (has_lo != self.has_lo) | (has_up != self.has_up)
-            self.lam[changed] = self.lam_lo[changed] = self.lam_up[changed] = 0.0
-            self._last_violation[changed] = np.inf  # no progress history of a new row
+        # a row's kind (equality, lower side, upper side) in one code: these three masks
+        # follow from (finite lb, finite ub, eq)
+        kind = finite_lb.view(np.uint8) + 2 * finite_ub.view(np.uint8) + 4 * eq.view(np.uint8)
+        if hasattr(self, "eq"):
+            changed = kind != self._kind
+            if changed.any():  # rarely: bounds usually keep their kind between solves
+                self.lam[changed] = self.lam_lo[changed] = self.lam_up[changed] = 0.0
+                self._last_violation[changed] = np.inf  # no progress history of a new row
+        self._kind = kind
         self.lb, self.ub, self.eq = lb, ub, eq
         self._any_eq = bool(eq.any())
         self.has_lo, self.has_up = has_lo, has_up

@@ -182,8 +182,7 @@ class IlqrSolver(Solver):
         self.x_init = None
         if np.all(np.isfinite(xlb[:, 0])) and np.array_equal(xlb[:, 0], xub[:, 0]):
             self.x_init = xlb[:, 0].copy()
-            xlb, xub = xlb.copy(), xub.copy()
-            xlb[:, 0], xub[:, 0] = -np.inf, np.inf
+            xlb[:, 0], xub[:, 0] = -np.inf, np.inf  # fresh arrays from stacked()
         # stage rows: constraints, then x bounds, then u bounds
         nc, ncN = m.nc_con, m.ncN_con
         lb, ub = np.empty((N, m.nc)), np.empty((N, m.nc))
