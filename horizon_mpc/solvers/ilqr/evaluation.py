@@ -211,10 +211,10 @@ class CompiledEvaluation:
     def set_stage_quadratisation(self, fn: ca.Function) -> None:
         """Quadratise with this stage function from now on (the solver's lean or full one:
         the same inputs and output shapes)."""
-        if [fn.size_out(i) for i in range(fn.n_out())] != self._stage_shapes:
-            raise ValueError(f"{fn.name()}: outputs unlike the bound quadratisation's")
-        entry = self._stage_fns.get(id(fn))
+        entry = self._stage_fns.get(id(fn))  # (fn, its entry): the key stays valid
         if entry is None:
+            if [fn.size_out(i) for i in range(fn.n_out())] != self._stage_shapes:
+                raise ValueError(f"{fn.name()}: outputs unlike the bound quadratisation's")
             entry = self._stage_fns[id(fn)] = (fn, GeneratedFunction.bind(fn))
         self._quad.stage = entry[1]
 
