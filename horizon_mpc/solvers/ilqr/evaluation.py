@@ -169,8 +169,17 @@ class CompiledEvaluation:
         self._stats = np.zeros(7)
         self._x_init = np.zeros(s["nx"])
         self._x_init_set: np.ndarray | None = None
+        # the problem's data: set_problem copies into these, the C code points at them
+        self._S, self._P = np.zeros(s["ns"]), np.zeros((s["N"] + 1, s["npar"]))
+        self._W, self._WN = np.zeros((s["N"], s["nr"])), np.zeros(s["nrN"])
+        self._b, self._eq = np.zeros((s["N"], s["ncon"])), np.zeros((s["N"], s["ncon"]), bool)
+        self._bN, self._eqN = np.zeros(s["ncNcon"]), np.zeros(s["ncNcon"], bool)
+        d.S, d.P, d.W, d.WN, d.b, d.eq, d.bN, d.eqN = (
+            a.ctypes.data if a.size else None
+            for a in (self._S, self._P, self._W, self._WN, self._b, self._eq, self._bN,
+                      self._eqN))
         self._al = (al, alN)
-        self._keep: tuple = ()
+        self._bind_multipliers()
         self._data_ptr, self._out_ptr = ctypes.pointer(d), ctypes.pointer(self._out)
         self._stats_ptr = self._stats.ctypes.data
         # the quadratisation: AL weights and targets, one buffer for every output
@@ -222,33 +231,35 @@ class CompiledEvaluation:
                     b: np.ndarray, eq: np.ndarray, bN: np.ndarray, eqN: np.ndarray) -> None:
         """The data of the next evaluations: S (ns,) singles, P (npar, N+1) parameters,
         W (N, nr) and WN (nrN,) residual weights, b and eq (N, ncon) the projected rows'
-        targets and mask, bN and eqN (ncNcon,) the terminal ones; the augmented Lagrangians'
-        current bounds, multipliers and penalties are read too."""
-        d, N = self._data, self.N
-        P = np.ascontiguousarray(np.asarray(P, dtype=np.float64).T)  # node by node
-        if P.shape != (N + 1, d.npar):
-            raise ValueError(f"P has shape {P.T.shape}; expected ({d.npar}, {N + 1})")
-        S = np.ascontiguousarray(S, dtype=np.float64).reshape(-1)
-        W, WN = _f64(W, (N, d.nr)), _f64(WN, (d.nrN,))
-        b, bN = _f64(b, (N, d.ncon)), _f64(bN, (d.ncNcon,))
-        eq = np.ascontiguousarray(eq, dtype=bool).view(np.uint8)
-        eqN = np.ascontiguousarray(eqN, dtype=bool).view(np.uint8)
-        if eq.shape != (N, d.ncon) or eqN.shape != (d.ncNcon,):
-            raise ValueError(f"eq / eqN have shapes {eq.shape} / {eqN.shape}")
-        self._keep = (S, P, W, WN, b, bN, eq, eqN)
-        d.S, d.P, d.W, d.WN, d.b, d.bN, d.eq, d.eqN = (
-            a.ctypes.data if a.size else None for a in self._keep)
-        al, alN = self._al
+        targets and mask, bN and eqN (ncNcon,) the terminal ones. Copied into arrays the C
+        code holds pointers to (set once); the augmented Lagrangians' bounds, multipliers
+        and penalties are read in place."""
+        for name, dst, src in (("S", self._S, np.reshape(S, -1)), ("P", self._P, P.T),
+                               ("W", self._W, W), ("WN", self._WN, WN), ("b", self._b, b),
+                               ("eq", self._eq, eq), ("bN", self._bN, bN),
+                               ("eqN", self._eqN, eqN)):
+            if np.shape(src) != dst.shape:
+                raise ValueError(f"{name} has shape {np.shape(src)}; expected {dst.shape}")
+            np.copyto(dst, src)
+        if any(a.lb is not lb for a, lb in zip(self._al, self._al_lb, strict=True)):
+            self._bind_multipliers()
+
+    def _bind_multipliers(self) -> None:
+        """Point the C data at the augmented Lagrangians' arrays (which they update in
+        place: ``AugmentedLagrangian`` keeps the same arrays throughout)."""
+        d = self._data
+        al = self._al[0]
         d.barrier, d.mu, d.delta = int(al.barrier), al.mu, al.delta
-        for block, a in ((d.al, al), (d.alN, alN)):
+        for block, a in ((d.al, self._al[0]), (d.alN, self._al[1])):
             arrays = (a.lb, a.ub, a.lam, a.lam_lo, a.lam_up, a.rho)
             if any(not x.flags.c_contiguous or x.dtype != np.float64 for x in arrays):
                 raise ValueError("the augmented Lagrangian's arrays must be C-contiguous float64")
             block.n = a.lam.size
             block.lb, block.ub, block.lam, block.lam_lo, block.lam_up, block.rho = (
                 x.ctypes.data for x in arrays)
+        self._al_lb = tuple(a.lb for a in self._al)
         self._al_arrays = tuple((a.lb, a.ub, a.lam, a.lam_lo, a.lam_up, a.rho)
-                                for a in self._al)
+                                for a in self._al)  # kept alive: the C code's pointers
 
     def set_initial_state(self, x_init: np.ndarray | None) -> None:
         """Node 0's fixed state (nx,), or None (free: d0 is zero)."""

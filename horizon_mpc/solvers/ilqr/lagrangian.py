@@ -116,13 +116,17 @@ class AugmentedLagrangian:
                 self.lam[changed] = self.lam_lo[changed] = self.lam_up[changed] = 0.0
                 self._last_violation[changed] = np.inf  # no progress history of a new row
         self._kind = kind
-        self.lb, self.ub, self.eq = lb, ub, eq
+        if hasattr(self, "lb"):  # the same arrays throughout: compiled readers keep pointers
+            np.copyto(self.lb, lb)
+            np.copyto(self.ub, ub)
+        else:
+            self.lb, self.ub = lb.copy(), ub.copy()
+        self.eq = eq
         self._any_eq = bool(eq.any())
         self.has_lo, self.has_up = has_lo, has_up
         self._barrier_memo = None
         if self._kernel is not None:
-            self._kernel.set_bounds(lb, ub)
-            return
+            return  # bound to self.lb and self.ub, updated in place
         # finite copies (0 where a row has no such bound) for the per-evaluation arithmetic
         self._b = np.where(eq, lb, 0.0)
         self._lo = np.where(self.has_lo, lb, 0.0)

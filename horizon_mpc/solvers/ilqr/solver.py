@@ -154,7 +154,7 @@ class IlqrSolver(Solver):
                 m.values, m.values_term, difference, m.quadratise, m.quadratise_term,
                 {"N": N, "nx": m.nx, "ndx": m.ndx, "nu": m.nu, "nr": m.nr, "nc": m.nc,
                  "ncon": m.nc_con, "nrN": m.nrN, "ncN": m.ncN, "ncNcon": m.ncN_con,
-                 "npar": prb.np_}, self._al, self._alN)
+                 "npar": prb.np_, "ns": prb.ns}, self._al, self._alN)
             self._backward, self._rollout = riccati_c.backward_pass_c, riccati_c.linear_rollout_c
             self._step_stats = riccati_c.step_stats_c
             pattern = None if m.ab_pattern is None else riccati_c.AbPattern.from_mask(
