@@ -147,7 +147,8 @@ class IlqrSolver(Solver):
         # dynamics Jacobians (go2 walking: 5 % of [A | B]) by their pattern
         self._ab_pattern: riccati_c.AbPattern | None = None  # also read by the projection
         self._step_stats = merit.step_stats
-        # a whole evaluation in one compiled call when the value functions are compiled
+        # the evaluation and the quadratisation in one compiled call each (when the
+        # functions are compiled: their C entry points are called from evaluation.c)
         self._compiled_eval: CompiledEvaluation | None = None
         if self.opts["codegen"] and riccati_c.available():
             self._compiled_eval = CompiledEvaluation.create(
