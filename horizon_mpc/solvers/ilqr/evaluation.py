@@ -207,14 +207,16 @@ class CompiledEvaluation:
 
     @classmethod
     def create(cls, *args, **kwargs) -> CompiledEvaluation | None:
-        """An instance, or None (with the reason logged at debug level) when the value
-        functions are not compiled or the compiled library is unavailable."""
+        """An instance, or None when the compiled library is unavailable (riccati_c logs
+        why) or the functions cannot be bound (logged here): the solver then evaluates
+        with numpy, the same numbers more slowly."""
         if not riccati_c.available():
             return None
         try:
             return cls(*args, **kwargs)
         except (RuntimeError, OSError, AttributeError) as err:
-            log.debug("compiled evaluation unavailable: %s", err)
+            log.info("ilqr: evaluating with numpy, the compiled evaluation is unavailable: %s",
+                     err)
             return None
 
     def set_stage_quadratisation(self, fn: ca.Function) -> None:
