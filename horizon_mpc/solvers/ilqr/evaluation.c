@@ -65,17 +65,13 @@ void riccati_al_rows(int n, const double *c, const double *lb, const double *ub,
                      const double *rho, int barrier, double mu, double delta, double *w,
                      double *t, double *viol, double *sums);
 
-static int call(const generated_fn *g, const double *a0, const double *a1, const double *a2,
-                const double *a3, const double *a4, double *r0, double *r1, double *r2)
+/* g(args) -> res: the first n_args arguments and n_res results set, the rest left as they
+ * are (f_work's sizes leave room for them) */
+static int call(const generated_fn *g, const double *const *args, int n_args,
+                double *const *res, int n_res)
 {
-    g->arg[0] = a0;
-    g->arg[1] = a1;
-    g->arg[2] = a2;
-    g->arg[3] = a3;
-    g->arg[4] = a4;
-    g->res[0] = r0;
-    g->res[1] = r1;
-    g->res[2] = r2;
+    for (int i = 0; i < n_args; i++) g->arg[i] = args[i];
+    for (int i = 0; i < n_res; i++) g->res[i] = res[i];
     return g->f(g->arg, g->res, g->iw, g->w, 0);
 }
 
@@ -116,12 +112,15 @@ int ilqr_evaluate(const evaluation_data *d, const double *X, const double *U,
                   const evaluation_out *o, double *stats)
 {
     const int N = d->N, nx = d->nx, ndx = d->ndx;
-    if (call(&d->values, X, U, d->S, d->P, X + nx, o->gap, o->r, o->c)) return 2;
-    if (call(&d->values_term, X + (size_t)N * nx, d->S, d->P + (size_t)N * d->npar, NULL, NULL,
-             o->rN, o->cN, NULL))
-        return 2;
+    const double *stage[5] = {X, U, d->S, d->P, X + nx};
+    double *stage_out[3] = {o->gap, o->r, o->c};
+    if (call(&d->values, stage, 5, stage_out, 3)) return 2;
+    const double *term[3] = {X + (size_t)N * nx, d->S, d->P + (size_t)N * d->npar};
+    double *term_out[2] = {o->rN, o->cN};
+    if (call(&d->values_term, term, 3, term_out, 2)) return 2;
     if (d->x_init) {
-        if (call(&d->difference, X, d->x_init, NULL, NULL, NULL, o->d0, NULL, NULL)) return 2;
+        const double *pair[2] = {X, d->x_init};
+        if (call(&d->difference, pair, 2, &o->d0, 1)) return 2;
     } else {
         for (int i = 0; i < ndx; i++) o->d0[i] = 0.0;
     }
@@ -203,17 +202,10 @@ int ilqr_quadratise(const evaluation_data *d, const quadratise_data *q, const do
     riccati_al_rows(aN->n, cN, aN->lb, aN->ub, aN->lam, aN->lam_lo, aN->lam_up, aN->rho,
                     d->barrier, d->mu, d->delta, q->wN, q->tN, NULL, sums);
 
-    const generated_fn *g = &q->stage;
-    const double *args[7] = {X, U, d->S, d->P, d->W, q->w, q->t};
-    for (int i = 0; i < 7; i++) g->arg[i] = args[i];
-    for (int i = 0; i < 9; i++) g->res[i] = q->out[i];
-    if (g->f(g->arg, g->res, g->iw, g->w, 0)) return 2;
-
-    g = &q->term;
-    const double *targs[6] = {X + (size_t)d->N * d->nx, d->S, d->P + (size_t)d->N * d->npar,
-                              d->WN, q->wN, q->tN};
-    for (int i = 0; i < 6; i++) g->arg[i] = targs[i];
-    for (int i = 0; i < 3; i++) g->res[i] = q->out_term[i];
-    if (g->f(g->arg, g->res, g->iw, g->w, 0)) return 2;
+    const double *stage[7] = {X, U, d->S, d->P, d->W, q->w, q->t};
+    if (call(&q->stage, stage, 7, q->out, 9)) return 2;
+    const double *term[6] = {X + (size_t)d->N * d->nx, d->S, d->P + (size_t)d->N * d->npar,
+                             d->WN, q->wN, q->tN};
+    if (call(&q->term, term, 6, q->out_term, 3)) return 2;
     return all_finite(q->buffer, q->n_buffer) ? 0 : 1;
 }

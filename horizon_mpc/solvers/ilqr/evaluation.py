@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import ctypes
 import logging
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -60,14 +59,14 @@ class GeneratedFunction(ctypes.Structure):
             size_fn = getattr(lib, f"{name}_casadi_{kind}_size")
             size_fn.restype = _i
             if size_fn() != 8:
-                raise RuntimeError(f"{Path(path).name}: casadi_{kind} is not 64-bit")
+                raise RuntimeError(f"{path.name}: casadi_{kind} is not 64-bit")
         sizes = (ctypes.c_longlong * 4)()
         work = getattr(lib, f"{name}_work")
         work.restype = _i
         if work(*(ctypes.byref(sizes, 8 * i) for i in range(4))) != 0:
             raise RuntimeError(f"{name}_work failed")
-        n_arg = max(int(sizes[0]), fn.n_in(), 5)  # evaluation.c sets 5 arguments, 3 results
-        n_res = max(int(sizes[1]), fn.n_out(), 3)
+        n_arg = max(int(sizes[0]), fn.n_in())
+        n_res = max(int(sizes[1]), fn.n_out())
         arg, res = (_p * n_arg)(), (_p * n_res)()
         iw = np.zeros(max(int(sizes[2]), 1), np.int64)
         w = np.zeros(max(int(sizes[3]), 1))
@@ -128,13 +127,6 @@ def _bind_library() -> ctypes.CDLL:
         lib.ilqr_quadratise.restype = _i
         lib._evaluation_bound = True
     return lib
-
-
-def _f64(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    a = np.ascontiguousarray(a, dtype=np.float64)
-    if a.shape != shape:
-        raise ValueError(f"array of shape {a.shape}; expected {shape}")
-    return a
 
 
 class CompiledEvaluation:
@@ -243,7 +235,8 @@ class CompiledEvaluation:
             if np.shape(src) != dst.shape:
                 raise ValueError(f"{name} has shape {np.shape(src)}; expected {dst.shape}")
             np.copyto(dst, src)
-        if any(a.lb is not lb for a, lb in zip(self._al, self._al_lb, strict=True)):
+        if any(a.lb is not arrays[0] for a, arrays in zip(self._al, self._al_arrays,
+                                                          strict=True)):
             self._bind_multipliers()
 
     def _bind_multipliers(self) -> None:
@@ -259,7 +252,6 @@ class CompiledEvaluation:
             block.n = a.lam.size
             block.lb, block.ub, block.lam, block.lam_lo, block.lam_up, block.rho = (
                 x.ctypes.data for x in arrays)
-        self._al_lb = tuple(a.lb for a in self._al)
         self._al_arrays = tuple((a.lb, a.ub, a.lam, a.lam_lo, a.lam_up, a.rho)
                                 for a in self._al)  # kept alive: the C code's pointers
 
