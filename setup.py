@@ -71,7 +71,8 @@ setup(
     python_requires=">=3.11",
     packages=find_packages(exclude=["test", "test.*", "bench", "bench.*"]),
     # C source compiled at run time (horizon_mpc.solvers.ilqr.riccati_c)
-    package_data={"horizon_mpc.solvers.ilqr": ["riccati.c", "evaluation.c"]},
+    package_data={"horizon_mpc.solvers.ilqr": ["riccati.c", "riccati.h", "evaluation.c",
+                                               "lq_step.c"]},
     # Paths are relative to this file's folder (colcon and pip run setup.py from there).
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),

@@ -31,7 +31,7 @@ from scipy.linalg.lapack import dtrtri as _trtri
 if TYPE_CHECKING:  # riccati_c imports this module
     from horizon_mpc.solvers.ilqr.riccati_c import AbPattern
 
-__all__ = ["EqualityLayout", "Projection", "project"]
+__all__ = ["EqualityLayout", "Projection", "fill_by_svd", "project"]
 
 
 @dataclass
@@ -301,11 +301,21 @@ def _qr_solve(W_flat: np.ndarray, rows: np.ndarray, nu: int, rtol: float,
     else:
         sol, fb = _qr_solve_numpy(W_flat, rows, nu, rtol)
     if fb.size:
-        W = W_flat[:-1].reshape(n, m, -1)
-        part = _svd_solve(W[fb] * rows[fb][..., None], nu, rtol)
-        for name in ("P_x", "P_e", "Z", "free", "pinv", "unmet"):
-            getattr(sol, name)[fb] = getattr(part, name)
+        fill_by_svd({name: getattr(sol, name) for name in _Solution.__dataclass_fields__},
+                    W_flat, rows, fb, nu, rtol)
     return sol
+
+
+def fill_by_svd(out: dict[str, np.ndarray], W_flat: np.ndarray, rows: np.ndarray,
+                fb: np.ndarray, nu: int, rtol: float) -> None:
+    """Overwrite nodes ``fb`` of a projection's arrays (``out``: P_x, P_e, Z, free, pinv,
+    unmet, shaped as :class:`Projection`'s) with :func:`_svd_solve`'s solution: the nodes
+    the QR could not take. W_flat, rows: as :func:`_stack_rows` returns them."""
+    n, m = rows.shape
+    W = W_flat[:-1].reshape(n, m, -1)
+    part = _svd_solve(W[fb] * rows[fb][..., None], nu, rtol)
+    for name, a in out.items():
+        a[fb] = getattr(part, name)
 
 
 def _qr_solve_numpy(W_flat: np.ndarray, rows: np.ndarray, nu: int,

@@ -16,6 +16,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "riccati.h"  /* riccati_al_rows */
+
 typedef long long casadi_int_t; /* casadi_int of the generated code (the binder checks it) */
 typedef int (*generated_entry)(const double **arg, double **res, casadi_int_t *iw, double *w,
                                int mem);
@@ -60,10 +62,6 @@ typedef struct {
 
 enum { EV_COST, EV_GAP_L1, EV_GAP_MAX, EV_EQ_L1, EV_EQ_MAX, EV_AL, EV_AL_VIOL, N_EV };
 
-void riccati_al_rows(int n, const double *c, const double *lb, const double *ub,
-                     const double *lam, const double *lam_lo, const double *lam_up,
-                     const double *rho, int barrier, double mu, double delta, double *w,
-                     double *t, double *viol, double *sums);
 
 /* g(args) -> res: the first n_args arguments and n_res results set, the rest left as they
  * are (f_work's sizes leave room for them) */

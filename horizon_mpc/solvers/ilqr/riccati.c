@@ -30,15 +30,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* inputs of riccati_backward, in this order */
-enum { IN_A, IN_B, IN_LX, IN_LU, IN_LXX, IN_LUU, IN_LUX, IN_F, IN_LXN, IN_LXXN,
-       IN_PE, IN_PX, IN_Z, IN_FREE, N_IN };
-/* outputs of riccati_backward */
-enum { OUT_K, OUT_KFF, OUT_S, OUT_SV, OUT_QU, OUT_QUU, OUT_QUX, N_OUT };
-/* inputs of riccati_rollout */
-enum { RO_A, RO_B, RO_F, RO_K, RO_KFF, RO_DX0, N_RO };
-/* inputs of riccati_stack_rows */
-enum { SR_C, SR_BND, SR_CX, SR_CU, SR_CN, SR_BNDN, SR_CXN, SR_A, SR_B, SR_GAP, N_SR };
+#include "riccati.h"  /* the entry points and their argument orders */
 
 #define NB 4  /* rows per block of the Cholesky factorisation and solves (= the tile rows) */
 

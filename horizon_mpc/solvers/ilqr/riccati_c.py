@@ -50,8 +50,10 @@ __all__ = ["AbPattern", "AlRowsKernel", "available", "backward_pass_c", "library
 _log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("riccati.c")
-# compiled into the same library: one evaluation of the problem (evaluation.py binds it)
-SOURCES = (SOURCE, Path(__file__).with_name("evaluation.c"))
+# compiled into the same library: one evaluation of the problem (evaluation.py binds it) and
+# the LQ step on bound arrays (lq_step.py); riccati.h declares what they call of riccati.c
+SOURCES = (SOURCE, *(Path(__file__).with_name(name) for name in ("evaluation.c", "lq_step.c")))
+HEADERS = (Path(__file__).with_name("riccati.h"),)
 # Plain optimisation only: no -march/-mavx2 (the cache may be shared by different CPUs; the
 # source dispatches to AVX2 itself) and no -ffast-math (NaN and inf must propagate as in
 # numpy, the caller's regularisation loop depends on it).
@@ -83,7 +85,7 @@ def _key(source: bytes) -> str:
 
 def library_path() -> Path:
     """Where the compiled library of the current source lives (it may not exist yet)."""
-    text = b"\0".join(path.read_bytes() for path in SOURCES)
+    text = b"\0".join(path.read_bytes() for path in (*SOURCES, *HEADERS))
     return codegen.default_cache_dir() / f"riccati_{_key(text)}.so"
 
 

@@ -35,6 +35,7 @@ from horizon_mpc.solvers.ilqr import merit, riccati, riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
 from horizon_mpc.solvers.ilqr.evaluation import CompiledEvaluation
 from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian
+from horizon_mpc.solvers.ilqr.lq_step import CompiledLqStep
 from horizon_mpc.solvers.ilqr.stages import build_stage_model
 
 __all__ = ["IlqrSolver"]
@@ -163,9 +164,20 @@ class IlqrSolver(Solver):
             if pattern is not None and pattern.density <= SPARSE_DYNAMICS:
                 self._ab_pattern = pattern
                 self._backward = functools.partial(riccati_c.backward_pass_c, pattern=pattern)
+        # the quadratisation's blocks: views of the compiled evaluation's persistent buffer
+        # (built once), which the compiled LQ step reads in place
+        self._q_views: dict[str, np.ndarray] | None = None
+        self._lq: CompiledLqStep | None = None
+        if self._compiled_eval is not None:
+            ce = self._compiled_eval
+            self._q_views = self._quadratisation_views(ce.quadratisation,
+                                                       ce.quadratisation_term)
+            self._lq = CompiledLqStep.create(
+                self._q_views, {"N": N, "ndx": m.ndx, "nu": m.nu, "nc": m.nc_con,
+                                "ncN": m.ncN_con, "ldc": m.nc}, self._ab_pattern)
         else:
             self._backward, self._rollout = riccati.backward_pass, riccati.linear_rollout
-        self.feedback_gains = np.zeros((N, m.nu, m.ndx))
+        self._gains = np.zeros((N, m.nu, m.ndx))
         self.timings: dict[str, float] = {}
         self._prepared: tuple | None = None  # (evaluation, LQ step, info) of prepare()
 
@@ -283,39 +295,41 @@ class IlqrSolver(Solver):
         return ev["cost"] + ev["al"] + nu * (ev["gap_l1"] + ev["eq_l1"])
 
     def _quadratise(self, X, U, ev):
-        m, N = self.model, self.model.n_nodes
+        N = self.model.n_nodes
         ce = self._compiled_eval
         if ce is not None:
             if not ce.quadratise(np.ascontiguousarray(X, dtype=float),
                                  np.ascontiguousarray(U, dtype=float), ev["c"], ev["cN"][0]):
                 return None
-            out, out_term = ce.quadratisation, ce.quadratisation_term
-        else:
-            wc, tc = self._al.weights_targets(ev["c"])
-            wcN, tcN = self._alN.weights_targets(ev["cN"])
-            out = self._quadratise_fn(X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T,
-                                      tc.T)
-            out_term = self._quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
-                                             tcN.T)
-            # one finiteness test on the outputs (NaN and inf propagate through sums)
-            if not math.isfinite(float(self._quadratise_fn.output_buffer.sum())
-                                 + float(self._quadratise_term.output_buffer.sum())):
-                return None
+            return self._q_views
+        wc, tc = self._al.weights_targets(ev["c"])
+        wcN, tcN = self._alN.weights_targets(ev["cN"])
+        out = self._quadratise_fn(X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T, tc.T)
+        out_term = self._quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
+                                         tcN.T)
+        # one finiteness test on the outputs (NaN and inf propagate through sums)
+        if not math.isfinite(float(self._quadratise_fn.output_buffer.sum())
+                             + float(self._quadratise_term.output_buffer.sum())):
+            return None
+        return self._quadratisation_views(out, out_term)
+
+    def _quadratisation_views(self, out, out_term) -> dict[str, np.ndarray]:
+        """The quadratisation's blocks node by node, views of the functions' outputs: A, B,
+        lx, lu, lxx, luu, lux (N, ...), lxN, lxxN, and the constraint Jacobians cx, cu
+        (N, nc_con, ...), cxN (ncN_con, ndx)."""
+        m, N = self.model, self.model.n_nodes
         A, B, lx, lu, lxx, luu, lux, cx, cu = out
         lxN, lxxN, cxN = out_term
         ndx, nu = m.ndx, m.nu
-        q = {
+        return {
             "A": _blocks(A, N, ndx, ndx), "B": _blocks(B, N, ndx, nu),
             "lx": lx.T, "lu": lu.T,
             "lxx": _blocks(lxx, N, ndx, ndx), "luu": _blocks(luu, N, nu, nu),
             "lux": _blocks(lux, N, nu, ndx),
             "lxN": lxN.reshape(ndx), "lxxN": lxxN.reshape(ndx, ndx),
+            "cx": _blocks(cx, N, m.nc_con, ndx), "cu": _blocks(cu, N, m.nc_con, nu),
+            "cxN": np.asarray(cxN).reshape(m.ncN_con, ndx),
         }
-        if self._layout.any:
-            q["cx"] = _blocks(cx, N, m.nc_con, ndx)
-            q["cu"] = _blocks(cu, N, m.nc_con, nu)
-            q["cxN"] = np.asarray(cxN).reshape(m.ncN_con, ndx)
-        return q
 
     def _retract(self, X, dX, alpha):
         return self._integrate(X.T, alpha * dX.T)[0].T.copy()
@@ -338,15 +352,22 @@ class IlqrSolver(Solver):
             self.mu = min(max(self.mu * 100, 1e-6), o["mu_max"])
             info["status_nan"] = 1.0
             return None
-        proj = None
+        proj, lq = None, self._lq
         if self._layout.any:
             nc, ncN = m.nc_con, m.ncN_con
-            proj = project(self._layout, ev["c"][:, :nc], q["cx"], q["cu"], ev["cN"][0, :ncN],
-                           q["cxN"], q["A"], q["B"], ev["gap"], pattern=self._ab_pattern)
+            if lq is not None:
+                proj = lq.project(self._layout, ev["c"], ev["cN"][0], ev["gap"])
+            else:
+                proj = project(self._layout, ev["c"][:, :nc], q["cx"], q["cu"],
+                               ev["cN"][0, :ncN], q["cxN"], q["A"], q["B"], ev["gap"],
+                               pattern=self._ab_pattern)
             info["rank_deficient_nodes"] = float(proj.rank_deficient)
         while True:
-            bw = self._backward(q["A"], q["B"], q["lx"], q["lu"], q["lxx"], q["luu"], q["lux"],
-                               ev["gap"], q["lxN"], q["lxxN"], self.mu, proj)
+            if lq is not None:
+                bw = lq.backward(ev["gap"], self.mu, proj)
+            else:
+                bw = self._backward(q["A"], q["B"], q["lx"], q["lu"], q["lxx"], q["luu"],
+                                    q["lux"], ev["gap"], q["lxN"], q["lxxN"], self.mu, proj)
             if bw is not None:
                 self._time("backward", time.perf_counter() - t1)
                 return q, proj, bw
@@ -376,14 +397,18 @@ class IlqrSolver(Solver):
         merit weight, line search, regularisation update."""
         o = self.opts
         t2 = time.perf_counter()
-        dX, dU = self._rollout(q["A"], q["B"], ev["gap"], bw, dx0)
-        self.feedback_gains = bw.K
-        # the model cost's directional derivative along the step (the gaps shrink linearly)
-        # and the largest multiplier estimate (costates and, with a projection, the projected
-        # rows' multipliers), which the l1 merit weight stays above
-        slope, lam_max, dx_max, du_max = self._step_stats(
-            q["lx"], q["lu"], q["lxN"], bw.s, bw.S, bw.Qu, bw.Quu, bw.Qux, dX, dU,
-            None if proj is None else proj.pinv)
+        # the step, the model cost's directional derivative along it (the gaps shrink
+        # linearly) and the largest multiplier estimate (costates and, with a projection, the
+        # projected rows' multipliers), which the l1 merit weight stays above
+        if self._lq is not None:
+            dX, dU, (slope, lam_max, dx_max, du_max) = self._lq.rollout(ev["gap"], bw, dx0,
+                                                                        proj)
+        else:
+            dX, dU = self._rollout(q["A"], q["B"], ev["gap"], bw, dx0)
+            slope, lam_max, dx_max, du_max = self._step_stats(
+                q["lx"], q["lu"], q["lxN"], bw.s, bw.S, bw.Qu, bw.Quu, bw.Qux, dX, dU,
+                None if proj is None else proj.pinv)
+        self._gains = bw.K
         self._nu = max(self._nu, 1.5 * lam_max, 1.0)
         nu = self._nu
         merit0 = self._merit(ev, nu)
@@ -556,6 +581,11 @@ class IlqrSolver(Solver):
             return False
         self._prepared = (ev, *lq, info)
         return True
+
+    @property
+    def feedback_gains(self) -> np.ndarray:
+        """The gains K (N, nu, ndx) of the last step taken (``du = K dx + k``), a copy."""
+        return self._gains.copy()
 
     @property
     def prepared(self) -> bool:
