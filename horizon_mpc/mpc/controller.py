@@ -127,7 +127,11 @@ class WalkingMpc:
         # are skipped when they would not end within it (real-time use; the bootstrap solve
         # ignores it)
         self.time_budget: float | None = None
-        self._interp: tuple[BufferedFunction, BufferedFunction] | None = None  # on first use
+        # the warm start's interpolation between nodes (ticks off the node grid): compiled
+        # now (~0.3 s once, then cached; 13 against 55 us per shift on go2), not in a tick
+        prb, N = self.wp.prb, self.wp.n_nodes
+        self._interp = (BufferedFunction(model.compile(prb.state_difference().map(N))),
+                        BufferedFunction(model.compile(prb.state_integrate().map(N))))
         # split real-time iteration (prepare() / the feedback of update()): the tick time
         # the prepared step is for
         self._prepared_for: float | None = None
@@ -334,9 +338,6 @@ class WalkingMpc:
         if abs(r) < tol:
             return
         prb, N = self.wp.prb, self.wp.n_nodes
-        if self._interp is None:
-            self._interp = (BufferedFunction(prb.state_difference().map(N)),
-                            BufferedFunction(prb.state_integrate().map(N)))
         diff, integ = self._interp
         X, U = prb.stacked("state"), prb.stacked("input")
         a, b = (slice(0, N), slice(1, N + 1)) if r > 0 else (slice(1, N + 1), slice(0, N))
