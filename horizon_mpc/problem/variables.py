@@ -64,34 +64,41 @@ class Variable(cs.SX):
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r}, dim={self.dim})"
 
-    def _nodes(self, nodes: NodeSelection) -> np.ndarray:
-        return select_nodes(nodes, self.n_values, f"{self.kind} variable {self.name!r}")
+    def _columns(self, nodes: NodeSelection) -> tuple[slice | np.ndarray, int]:
+        """The columns of ``nodes`` and their number: a slice for every node or one node
+        (the per-tick calls: no index arrays), else the sorted node indices."""
+        if nodes is None:
+            return slice(None), self.n_values
+        if type(nodes) is int and 0 <= nodes < self.n_values:
+            return slice(nodes, nodes + 1), 1
+        idx = select_nodes(nodes, self.n_values, f"{self.kind} variable {self.name!r}")
+        return idx, idx.size
 
-    def _values(self, value, idx: np.ndarray, what: str) -> np.ndarray:
-        return broadcast_values(value, self.dim, idx.size, f"{what} of {self.name!r}")
+    def _values(self, value, n: int, what: str) -> np.ndarray:
+        return broadcast_values(value, self.dim, n, f"{what} of {self.name!r}")
 
     def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:
         """Set lower and upper bounds on ``nodes`` (scalar, (dim,) or (dim, n_sel))."""
-        idx = self._nodes(nodes)
-        lo, hi = self._values(lb, idx, "lower bound"), self._values(ub, idx, "upper bound")
+        cols, n = self._columns(nodes)
+        lo, hi = self._values(lb, n, "lower bound"), self._values(ub, n, "upper bound")
         if np.any(lo > hi):
             raise ValueError(f"bounds of {self.name!r}: lower bound above upper bound")
-        self._lb[:, idx], self._ub[:, idx] = lo, hi
+        self._lb[:, cols], self._ub[:, cols] = lo, hi
 
     def set_lower_bounds(self, lb, nodes: NodeSelection = None) -> None:
         """Set the lower bounds only."""
-        idx = self._nodes(nodes)
-        self._lb[:, idx] = self._values(lb, idx, "lower bound")
+        cols, n = self._columns(nodes)
+        self._lb[:, cols] = self._values(lb, n, "lower bound")
 
     def set_upper_bounds(self, ub, nodes: NodeSelection = None) -> None:
         """Set the upper bounds only."""
-        idx = self._nodes(nodes)
-        self._ub[:, idx] = self._values(ub, idx, "upper bound")
+        cols, n = self._columns(nodes)
+        self._ub[:, cols] = self._values(ub, n, "upper bound")
 
     def set_initial_guess(self, value, nodes: NodeSelection = None) -> None:
         """Set the initial guess (warm start) on ``nodes``."""
-        idx = self._nodes(nodes)
-        self._init[:, idx] = self._values(value, idx, "initial guess")
+        cols, n = self._columns(nodes)
+        self._init[:, cols] = self._values(value, n, "initial guess")
 
     @property
     def lower_bounds(self) -> np.ndarray:
@@ -181,8 +188,8 @@ class SingleVariable(Variable):
     def __init__(self, name: str, dim: int):
         super().__init__(name, dim, 1)
 
-    def _nodes(self, nodes: NodeSelection) -> np.ndarray:
-        return np.array([0])
+    def _columns(self, nodes: NodeSelection) -> tuple[slice, int]:
+        return slice(0, 1), 1
 
 
 class Parameter(Variable):
@@ -195,8 +202,8 @@ class Parameter(Variable):
 
     def assign(self, value, nodes: NodeSelection = None) -> None:
         """Assign the parameter's value on ``nodes`` (scalar, (dim,) or (dim, n_sel))."""
-        idx = self._nodes(nodes)
-        self._init[:, idx] = self._values(value, idx, "value")
+        cols, n = self._columns(nodes)
+        self._init[:, cols] = self._values(value, n, "value")
 
     @property
     def values(self) -> np.ndarray:
