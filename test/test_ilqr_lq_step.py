@@ -106,17 +106,25 @@ def test_the_compiled_lq_step_matches_the_wrappers(dependent_node, sparse):
     assert proj.rank_deficient == (0 if dependent_node is None else 1)
 
 
-def test_a_failed_backward_pass_keeps_the_last_good_one():
+def test_a_failed_backward_pass_keeps_the_gains_of_the_steps_taken():
     q, ev, layout, pattern = _data(seed=5)
     lq = CompiledLqStep(q, {"N": N, "ndx": NDX, "nu": NU, "nc": NC, "ncN": NCN,
                             "ldc": NC + 3}, pattern)
     proj = lq.project(layout, ev["c"], ev["cN"][0], ev["gap"])
-    good = lq.backward(ev["gap"], 1e-6, proj)
-    K = good.K.copy()
+    taken = lq.backward(ev["gap"], 1e-6, proj)
+    lq.rollout(ev["gap"], taken, np.zeros(NDX), proj)
+    K_taken = taken.K.copy()
+    good = lq.backward(ev["gap"], 1e-3, proj)  # a later pass, not rolled out
+    K_good = good.K.copy()
     q["luu"][4] = -1e6 * np.eye(NU)  # indefinite at node 4, which has no row (read in place)
     assert lq.backward(ev["gap"], 1e-6, proj) is None
-    np.testing.assert_array_equal(good.K, K)  # the failed pass wrote the other gains
-    dX, dU, _ = lq.rollout(ev["gap"], good, np.zeros(NDX), proj)
+    np.testing.assert_array_equal(taken.K, K_taken)  # the failed pass wrote a third array
+    np.testing.assert_array_equal(good.K, K_good)
+    with pytest.raises(ValueError, match="successful"):  # its k, S, ... were overwritten
+        lq.rollout(ev["gap"], good, np.zeros(NDX), proj)
+    q["luu"][4] = np.eye(NU)
+    again = lq.backward(ev["gap"], 1e-6, proj)
+    dX, dU, _ = lq.rollout(ev["gap"], again, np.zeros(NDX), proj)
     assert np.all(np.isfinite(dX)) and np.all(np.isfinite(dU))
 
 

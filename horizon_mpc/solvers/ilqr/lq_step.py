@@ -12,9 +12,11 @@ go2's walking MPC those wrappers cost ~0.5 ms per tick in the closed loop, ~13 %
 
 Outputs are persistent and overwritten by the next call of the same kind: the
 :class:`.equality.Projection` of :meth:`CompiledLqStep.project`, the
-:class:`.riccati.BackwardResult` of :meth:`CompiledLqStep.backward` (the gains alternate
-between two arrays, so that a failed pass leaves the last good result intact) and the step
-of :meth:`CompiledLqStep.rollout`.
+:class:`.riccati.BackwardResult` of :meth:`CompiledLqStep.backward` and the step
+of :meth:`CompiledLqStep.rollout`. A failed backward pass overwrites the last result (its
+rollout is refused until a pass succeeds) except its gains: they rotate through three
+arrays, a pass writing neither the last good pass's nor those of the last step rolled out,
+so the gains of the step taken stay valid until the next rollout.
 """
 
 from __future__ import annotations
@@ -132,12 +134,14 @@ class CompiledLqStep:
         self.P_e, self.P_x = np.zeros((N, nu)), np.zeros((N, nu, ndx))
         self.Z, self.free = np.zeros((N, nu, nu)), np.zeros((N, nu))
         self._ok, self._unmet, self._con = (np.zeros(N, np.uint8) for _ in range(3))
-        # backward outputs: two gain arrays (the current and the next pass's), then the rest
-        self._K = (np.zeros((N, nu, ndx)), np.zeros((N, nu, ndx)))
+        # backward outputs: three gain arrays (see the module docstring), then the rest
+        self._K = tuple(np.zeros((N, nu, ndx)) for _ in range(3))
         self._bw = (np.zeros((N, nu)), np.zeros((N + 1, ndx, ndx)), np.zeros((N + 1, ndx)),
                     np.zeros((N, nu)), np.zeros((N, nu, nu)), np.zeros((N, nu, ndx)))
         self._results = tuple(BackwardResult(K, *self._bw) for K in self._K)
         self._cur = 0  # self._results[self._cur] is the last good pass
+        self._rolled = 0  # the gains of the last rollout (not written until the next one)
+        self._valid = False  # no failed pass since the last good one
         self.dX, self.dU = np.zeros((N + 1, ndx)), np.zeros((N, nu))
         self._stats = np.zeros(4)
         for name in ("W", "rows", "pinv"):
@@ -252,7 +256,7 @@ class CompiledLqStep:
         """:func:`.riccati_c.backward_pass_c` of the bound quadratisation with the defects
         gap (N, ndx) (C-contiguous), regularisation ``mu`` and ``proj`` (None, or the last
         :meth:`project`'s result). None when a (reduced) Q_uu is not positive definite or a
-        feed-forward term is not finite; the last good result stays valid then.
+        feed-forward term is not finite (the earlier results' gains stay as they were).
 
         Raises:
             ValueError: ``proj`` is not this instance's last projection, or gap's shape.
@@ -260,7 +264,8 @@ class CompiledLqStep:
         """
         if proj is not None and proj is not self._projection:
             raise ValueError("proj must be the last projection of this CompiledLqStep")
-        nxt = 1 - self._cur
+        nxt = ({0, 1, 2} - {self._cur, self._rolled}).pop()
+        self._valid = False
         ret = self._lib.lq_backward(self._ptr, self._pointer("gap", gap, (self.N, self.ndx),
                                                              np.float64),
                                     float(mu), proj is not None, self._K_ptr[nxt],
@@ -271,7 +276,7 @@ class CompiledLqStep:
             log.debug("backward pass failed at node %d (%s)", self._fail.value,
                       "Q_uu not positive definite" if ret == 1 else "k not finite")
             return None
-        self._cur = nxt
+        self._cur, self._valid = nxt, True
         return self._results[nxt]
 
     def rollout(self, gap: np.ndarray, bw: BackwardResult, dx0: np.ndarray,
@@ -286,8 +291,9 @@ class CompiledLqStep:
             ValueError: ``bw`` or ``proj`` are not this instance's last ones, or a shape.
             MemoryError: no memory for the C code's workspace.
         """
-        if bw is not self._results[self._cur]:
-            raise ValueError("bw must be the last backward pass of this CompiledLqStep")
+        if bw is not self._results[self._cur] or not self._valid:
+            raise ValueError("bw must be the last backward pass of this CompiledLqStep, "
+                             "successful")
         if proj is not None and proj is not self._projection:
             raise ValueError("proj must be the last projection of this CompiledLqStep")
         dx0 = np.ascontiguousarray(dx0, dtype=np.float64)
@@ -298,5 +304,6 @@ class CompiledLqStep:
                                 self._pointer("dx0", dx0, (self.ndx,), np.float64), m,
                                 self._stats_ptr):
             raise MemoryError("lq_rollout: out of memory for its workspace")
+        self._rolled = self._cur
         slope, lam, dx, du = self._stats.tolist()
         return self.dX, self.dU, (slope, lam, dx, du)
