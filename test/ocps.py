@@ -1,4 +1,4 @@
-"""Small optimal control problems shared by the solver tests."""
+"""Small optimal control problems, and a trotting go2 MPC, shared by the solver tests."""
 
 import casadi as cs
 import numpy as np
@@ -19,3 +19,17 @@ def pendulum_swing_up(u_max: float, n_nodes: int = 60) -> Problem:
     prb.create_cost("effort", u, weight=0.1)
     prb.create_final_constraint("upright", x - np.array([np.pi, 0.0]))
     return prb
+
+
+def trotting_go2_mpc(ticks: int):
+    """A go2 ``WalkingMpc`` started standing and ticked ``ticks`` times (0.02 s apart, the
+    state held) under a forward, sideways and turning command: trotting, so its problem has
+    projected rows, stance changes and terminal rows."""
+    from horizon_mpc.mpc import WalkingMpc
+
+    mpc = WalkingMpc("go2")
+    q, v = mpc.wp.q.initial_guess[:, 0].copy(), mpc.wp.v.initial_guess[:, 0].copy()
+    mpc.start(q, v, 0.0)
+    for k in range(1, ticks + 1):
+        mpc.update(0.02 * k, q, v, np.array([0.3, 0.1, 0.2]))
+    return mpc

@@ -7,7 +7,7 @@ from __future__ import annotations
 import casadi as cs
 import numpy as np
 import pytest
-from ocps import pendulum_swing_up
+from ocps import pendulum_swing_up, trotting_go2_mpc
 
 from horizon_mpc import make_solver
 from horizon_mpc.codegen import codegen_enabled
@@ -86,14 +86,7 @@ def test_the_compiled_evaluation_matches_numpy_with_a_free_initial_state():
 
 
 def test_the_compiled_evaluation_matches_numpy_on_the_walking_problem():
-    from horizon_mpc.mpc import WalkingMpc
-
-    mpc = WalkingMpc("go2")
-    q, v = mpc.wp.q.initial_guess[:, 0].copy(), mpc.wp.v.initial_guess[:, 0].copy()
-    mpc.start(q, v, 0.0)
-    for k in range(1, 16):  # trotting: projected rows, stance changes, terminal rows
-        mpc.update(0.02 * k, q, v, np.array([0.3, 0.1, 0.2]))
-    solver = mpc.solver
+    solver = trotting_go2_mpc(15).solver
     X, U = _perturbed(solver, seed=2)
     a, b = _both(solver, X, U)
     assert solver._layout.any

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from ocps import trotting_go2_mpc
 
 from horizon_mpc.solvers.ilqr import riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
@@ -153,16 +154,10 @@ def test_the_compiled_lq_step_refuses_what_it_was_not_bound_to():
 
 def test_the_solver_steps_the_same_with_and_without_it_on_the_walking_problem():
     from horizon_mpc.codegen import codegen_enabled
-    from horizon_mpc.mpc import WalkingMpc
 
     if not codegen_enabled():
         pytest.skip("needs code generation (the compiled evaluation's buffer)")
-    mpc = WalkingMpc("go2")
-    q, v = mpc.wp.q.initial_guess[:, 0].copy(), mpc.wp.v.initial_guess[:, 0].copy()
-    mpc.start(q, v, 0.0)
-    for k in range(1, 12):  # trotting: projected rows, stance changes, terminal rows
-        mpc.update(0.02 * k, q, v, np.array([0.3, 0.1, 0.2]))
-    solver = mpc.solver
+    solver = trotting_go2_mpc(11).solver
     assert solver._lq is not None and solver._layout.any
     rng = np.random.default_rng(4)
     X = solver.X + 0.02 * rng.standard_normal(solver.X.shape)

@@ -121,7 +121,7 @@ class CompiledLqStep:
         self.rtol = float(rtol)
         s = self._s = _LqStep(N=N, ndx=ndx, nu=nu, nc=nc, ncN=ncN,
                               variant=riccati_c._variant(), rtol=self.rtol)
-        self._pattern = pattern
+        self._pattern = pattern  # kept alive: the C code reads its data
         if pattern is not None:
             riccati_c._check_pattern(pattern, ndx, nu)
             s.pat = pattern.data.ctypes.data
@@ -177,6 +177,7 @@ class CompiledLqStep:
         self._stats_ptr = self._stats.ctypes.data
         self._fail = ctypes.c_int(-1)
         self._views: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._no_rows = np.zeros(1)  # cN and bN without terminal rows (never read)
         self._projection: Projection | None = None
 
     @classmethod
@@ -224,8 +225,7 @@ class CompiledLqStep:
         own_cols, nxt_cols, term_cols, m = _slots(layout)
         if m == 0:
             raise ValueError("the layout has no projected row")
-        cols = [np.ascontiguousarray(a, dtype=np.int32) for a in (own_cols, nxt_cols,
-                                                                  term_cols)]
+        cols = [riccati_c._int32(a) for a in (own_cols, nxt_cols, term_cols)]
         own = np.ascontiguousarray(layout.own, dtype=bool)
         nxt = np.ascontiguousarray(layout.next, dtype=bool)
         W_flat, rows, pinv = self._slot_views(m)
@@ -233,9 +233,9 @@ class CompiledLqStep:
         bad = self._lib.lq_project(
             self._ptr, self._pointer("c", c, (N, self.ldc), np.float64),
             self._pointer("b", layout.b, (N, nc), np.float64),
-            self._pointer("cN", cN[:max(ncN, 1)] if ncN else np.zeros(1), (max(ncN, 1),),
+            self._pointer("cN", cN[:ncN] if ncN else self._no_rows, (max(ncN, 1),),
                           np.float64),
-            self._pointer("bN", layout.bN if ncN else np.zeros(1), (max(ncN, 1),),
+            self._pointer("bN", layout.bN if ncN else self._no_rows, (max(ncN, 1),),
                           np.float64),
             self._pointer("gap", gap, (N, self.ndx), np.float64),
             self._pointer("own", own, (N, nc), bool), self._pointer("nxt", nxt, (N, nc), bool),

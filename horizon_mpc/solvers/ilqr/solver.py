@@ -354,12 +354,11 @@ class IlqrSolver(Solver):
             return None
         proj, lq = None, self._lq
         if self._layout.any:
-            nc, ncN = m.nc_con, m.ncN_con
             if lq is not None:
                 proj = lq.project(self._layout, ev["c"], ev["cN"][0], ev["gap"])
             else:
-                proj = project(self._layout, ev["c"][:, :nc], q["cx"], q["cu"],
-                               ev["cN"][0, :ncN], q["cxN"], q["A"], q["B"], ev["gap"],
+                proj = project(self._layout, ev["c"][:, :m.nc_con], q["cx"], q["cu"],
+                               ev["cN"][0, :m.ncN_con], q["cxN"], q["A"], q["B"], ev["gap"],
                                pattern=self._ab_pattern)
             info["rank_deficient_nodes"] = float(proj.rank_deficient)
         while True:
