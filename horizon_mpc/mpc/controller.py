@@ -304,7 +304,8 @@ class WalkingMpc:
         """Whether the solver's last result is usable (finite, not diverged); counts and
         logs (once per burst) the failures."""
         sol = self.solver.solution
-        finite = bool(sol) and all(np.all(np.isfinite(sol[k])) for k in ("q", "v", "a", "f"))
+        # q, v, a, f are rows of the stacked x and u
+        finite = bool(sol) and bool(np.isfinite(sol["x"]).all() and np.isfinite(sol["u"]).all())
         diverged = self.solver.stats.constraint_violation > self.divergence_threshold
         if finite and math.isfinite(self.solver.stats.cost) and not diverged:
             self.failures = 0
@@ -318,8 +319,9 @@ class WalkingMpc:
     # ------------------------------------------------------------------ pieces
     @staticmethod
     def _clean_q(q: np.ndarray) -> np.ndarray:
+        """A copy of ``q`` with a unit base quaternion (identity if it has no direction)."""
         q = np.array(q, dtype=float)
-        n = np.linalg.norm(q[3:7])
+        n = math.hypot(*q[3:7].tolist())  # four numbers: no numpy call (every tick)
         q[3:7] = q[3:7] / n if n > 1e-9 else (0.0, 0.0, 0.0, 1.0)
         return q
 
@@ -339,7 +341,7 @@ class WalkingMpc:
             return
         prb, N = self.wp.prb, self.wp.n_nodes
         diff, integ = self._interp
-        X, U = prb.stacked("state"), prb.stacked("input")
+        X, U = prb.stacked("state", copy=False), prb.stacked("input", copy=False)
         a, b = (slice(0, N), slice(1, N + 1)) if r > 0 else (slice(1, N + 1), slice(0, N))
         X_new = X.copy()
         X_new[:, a] = integ(X[:, a], abs(r) * diff(X[:, a], X[:, b])[0])[0]

@@ -32,13 +32,12 @@ from horizon_mpc.problem.variables import (
     SingleVariable,
     StateVariable,
     Variable,
+    VariableGroup,
 )
 
 __all__ = ["Problem"]
 
 # Problem.stacked: what -> the Variable array it reads
-_STACKED_ARRAY = {"initial_guess": "_init", "lower_bounds": "_lb", "upper_bounds": "_ub"}
-
 log = logging.getLogger(__name__)
 
 TRANSCRIPTIONS = ("multiple_shooting", "direct_collocation")
@@ -55,10 +54,14 @@ class Problem:
         if not isinstance(n_nodes, (int, np.integer)) or n_nodes < 1:
             raise ValueError(f"n_nodes must be an int >= 1, got {n_nodes!r}")
         self.n_nodes = int(n_nodes)
-        self.states: list[StateVariable] = []
-        self.inputs: list[InputVariable] = []
-        self.singles: list[SingleVariable] = []
-        self.parameters: list[Parameter] = []
+        # each kind's arrays stacked (VariableGroup); the lists are the groups' own
+        self._groups = {"state": VariableGroup(self.n_nodes + 1),
+                        "input": VariableGroup(self.n_nodes), "single": VariableGroup(1),
+                        "parameter": VariableGroup(self.n_nodes + 1)}
+        self.states: list[StateVariable] = self._groups["state"].variables
+        self.inputs: list[InputVariable] = self._groups["input"].variables
+        self.singles: list[SingleVariable] = self._groups["single"].variables
+        self.parameters: list[Parameter] = self._groups["parameter"].variables
         self.constraints: dict[str, Constraint] = {}
         self.costs: dict[str, Cost | GeneralCost] = {}
         self._xdot: cs.SX | None = None
@@ -89,7 +92,7 @@ class Problem:
             raise RuntimeError(f"cannot create state variable {name!r} after set_dynamics(): "
                                "create all states and inputs before the dynamics")
         var = StateVariable(name, int(dim), self.n_nodes)
-        self.states.append(var)
+        self._groups["state"].add(var)
         return var
 
     def create_input_variable(self, name: str, dim: int) -> InputVariable:
@@ -99,21 +102,21 @@ class Problem:
             raise RuntimeError(f"cannot create input variable {name!r} after set_dynamics(): "
                                "create all states and inputs before the dynamics")
         var = InputVariable(name, int(dim), self.n_nodes)
-        self.inputs.append(var)
+        self._groups["input"].add(var)
         return var
 
     def create_single_variable(self, name: str, dim: int) -> SingleVariable:
         """A decision variable with one value for the whole horizon."""
         self._check_new(name, dim, "single variable")
         var = SingleVariable(name, int(dim))
-        self.singles.append(var)
+        self._groups["single"].add(var)
         return var
 
     def create_parameter(self, name: str, dim: int) -> Parameter:
         """A parameter (one value per node, set with ``assign``), not optimised."""
         self._check_new(name, dim, "parameter")
         var = Parameter(name, int(dim), self.n_nodes)
-        self.parameters.append(var)
+        self._groups["parameter"].add(var)
         return var
 
     @property
@@ -435,8 +438,8 @@ class Problem:
         The last node keeps its value. Node sets of constraints and costs are not changed;
         update them (``term.set_nodes``) or their parameters for a moving schedule.
         """
-        for v in [*self.states, *self.inputs, *self.parameters]:
-            v.shift()
+        for kind in ("state", "input", "parameter"):
+            self._groups[kind].shift()
 
     def initial_guess(self) -> dict[str, np.ndarray]:
         """Initial guesses of all variables by name (shapes (dim, n_values))."""
@@ -444,28 +447,25 @@ class Problem:
 
     def parameter_values(self) -> np.ndarray:
         """Stacked parameter values, shape (np, N+1)."""
-        if not self.parameters:
-            return np.zeros((0, self.n_nodes + 1))
-        return np.vstack([p._init for p in self.parameters])  # vstack copies
+        return self._groups["parameter"].stacked().copy()
 
-    def stacked(self, kind: str, what: str = "initial_guess") -> np.ndarray:
+    def stacked(self, kind: str, what: str = "initial_guess", copy: bool = True) -> np.ndarray:
         """Stack ``what`` (initial_guess, lower_bounds, upper_bounds) of a variable kind.
 
-        Returns an array of shape (dim, n_values) for 'state' (N+1), 'input' (N) or
-        'single' (1).
+        Returns an array of shape (dim, n_values) for 'state' (N+1), 'input' (N),
+        'single' (1) or 'parameter' (N+1, the values). ``copy=False``: the problem's own
+        stacked array, read-only and valid until the next change (no copy: the solvers'
+        per-solve reading).
         """
-        group = {"state": self.states, "input": self.inputs, "single": self.singles}[kind]
-        n = {"state": self.n_nodes + 1, "input": self.n_nodes, "single": 1}[kind]
-        if not group:
-            return np.zeros((0, n))
-        # the variables' own arrays (vstack copies them; the public properties would copy
-        # twice: this runs several times per solve)
-        return np.vstack([getattr(v, _STACKED_ARRAY[what]) for v in group])
+        try:
+            group = self._groups[kind]
+        except KeyError:
+            raise KeyError(f"unknown variable kind {kind!r}; kinds are: "
+                           f"{', '.join(self._groups)}") from None
+        out = group.stacked(what)
+        return out.copy() if copy else out
 
     def set_stacked_initial_guess(self, kind: str, values: np.ndarray) -> None:
-        """Write a stacked array (as from :meth:`stacked`) back into the variables."""
-        group = {"state": self.states, "input": self.inputs, "single": self.singles}[kind]
-        i = 0
-        for v in group:
-            v.set_initial_guess(values[i:i + v.dim])
-            i += v.dim
+        """Write a stacked array (as from :meth:`stacked`, shape (dim, n_values)) back into
+        the variables of ``kind``."""
+        self._groups[kind].set_initial_guess(values)

@@ -11,12 +11,19 @@ are ignored.
 
 from __future__ import annotations
 
+import itertools
+
 import casadi as cs
 import numpy as np
 
 from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, select_nodes
 
-__all__ = ["Constraint", "Cost", "GeneralCost", "Term", "stacked_bounds", "stacked_weights"]
+__all__ = ["Constraint", "Cost", "GeneralCost", "Term", "revisions", "stacked_active",
+           "stacked_bounds", "stacked_weights"]
+
+# one counter for every term: a term's revision is unique, so a tuple of revisions names
+# the state of a list of terms (what the solvers cache their per-solve reading on)
+_REVISIONS = itertools.count(1)
 
 
 class Term:
@@ -30,6 +37,8 @@ class Term:
         uses_input: whether the expression depends on the inputs of its node.
         offsets: sorted node offsets of the offset variables it uses.
         valid_nodes: nodes where the term can be evaluated.
+        revision: changes whenever the term's nodes, bounds or weight do (see
+            :func:`revisions`).
     """
 
     kind = "term"
@@ -48,6 +57,8 @@ class Term:
         self._active = np.zeros(n_nodes + 1, dtype=bool)
         self._valid_mask = np.zeros(n_nodes + 1, dtype=bool)
         self._valid_mask[valid_nodes] = True
+        self._invalid_nodes = np.flatnonzero(~self._valid_mask)
+        self.revision = next(_REVISIONS)
         self.set_nodes(nodes)
 
     def __repr__(self) -> str:
@@ -67,7 +78,8 @@ class Term:
         else:
             mask = np.zeros_like(self._active)
             mask[select_nodes(nodes, self.n_nodes + 1, f"{self.kind} {self.name!r}")] = True
-        if np.any(mask & ~self._valid_mask):
+        # the nodes a term cannot live on are few (node N for an input term): test those
+        if self._invalid_nodes.size and mask[self._invalid_nodes].any():
             invalid = np.flatnonzero(mask & ~self._valid_mask)
             raise IndexError(
                 f"{self.kind} {self.name!r} cannot be evaluated on nodes {invalid.tolist()} "
@@ -78,6 +90,7 @@ class Term:
     def set_nodes(self, nodes: NodeSelection) -> None:
         """Make the term active exactly on ``nodes`` (None: every valid node)."""
         np.copyto(self._active, self._select_mask(nodes))
+        self.revision = next(_REVISIONS)
 
     @property
     def nodes(self) -> np.ndarray:
@@ -99,6 +112,7 @@ class Constraint(Term):
         super().__init__(*args, **kwargs)
         self._lb = np.zeros((self.dim, self.n_nodes + 1))
         self._ub = np.zeros((self.dim, self.n_nodes + 1))
+        self.bounds_revision = self.revision  # changes with the bounds only
         if bounds is not None:
             self.set_bounds(*bounds)
 
@@ -111,6 +125,7 @@ class Constraint(Term):
         if np.any(lo > hi):
             raise ValueError(f"constraint {self.name!r}: lower bound above upper bound")
         self._lb[:, idx], self._ub[:, idx] = lo, hi
+        self.revision = self.bounds_revision = next(_REVISIONS)
 
     @property
     def lower_bounds(self) -> np.ndarray:
@@ -149,6 +164,7 @@ class Cost(Term):
         if np.any(w < 0) or not np.all(np.isfinite(w)):
             raise ValueError(f"weight of cost {self.name!r} must be finite and >= 0")
         self._weight = w
+        self.revision = self.weight_revision = next(_REVISIONS)
 
     @property
     def weight(self) -> np.ndarray:
@@ -171,18 +187,26 @@ def stacked_bounds(constraints: list[Constraint]
     if not constraints:
         return np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0), bool)
     return (np.concatenate([c._lb for c in constraints]),
-            np.concatenate([c._ub for c in constraints]), _stacked_active(constraints))
+            np.concatenate([c._ub for c in constraints]), stacked_active(constraints))
 
 
-def stacked_weights(costs: list[Cost]) -> np.ndarray:
+def stacked_weights(costs: list[Cost], weights: np.ndarray | None = None) -> np.ndarray:
     """Weight of each residual row of ``costs`` (stacked in order) per node,
-    (sum of dims, N+1): the cost's weight where it is active, 0 elsewhere."""
+    (sum of dims, N+1): the cost's weight where it is active, 0 elsewhere. ``weights``:
+    the rows' weights when the caller has them stacked already (sum of dims,)."""
     if not costs:
         return np.zeros((0, 0))
-    return _stacked_active(costs) * np.concatenate([c._weight for c in costs])[:, None]
+    if weights is None:
+        weights = np.concatenate([c._weight for c in costs])
+    return stacked_active(costs) * weights[:, None]
 
 
-def _stacked_active(terms: list[Term]) -> np.ndarray:
+def revisions(terms: list[Term]) -> tuple[int, ...]:
+    """The revisions of ``terms``: equal tuples mean nothing in them changed in between."""
+    return tuple(t.revision for t in terms)
+
+
+def stacked_active(terms: list[Term]) -> np.ndarray:
     """Each term's (N+1,) node mask repeated over its rows: (sum of dims, N+1)."""
     return np.repeat(np.array([t._active for t in terms]), [t.dim for t in terms], axis=0)
 

@@ -25,6 +25,7 @@ __all__ = [
     "SingleVariable",
     "StateVariable",
     "Variable",
+    "VariableGroup",
 ]
 
 
@@ -77,6 +78,18 @@ class Variable(cs.SX):
     def _values(self, value, n: int, what: str) -> np.ndarray:
         return broadcast_values(value, self.dim, n, f"{what} of {self.name!r}")
 
+    def _write(self, target: np.ndarray, cols: slice | np.ndarray, n: int, value,
+               what: str) -> None:
+        """``target[:, cols] = value`` for the shapes :func:`broadcast_values` takes, by
+        numpy's broadcasting (no intermediate array: these run every MPC tick)."""
+        arr = np.asarray(value, dtype=float)
+        if arr.ndim == 1 and arr.shape[0] == self.dim:
+            arr = arr[:, None]
+        elif not (arr.ndim == 0 or (arr.ndim == 2 and arr.shape[0] == self.dim
+                                    and arr.shape[1] in (1, n))):
+            self._values(value, n, what)  # raises the shape error
+        target[:, cols] = arr
+
     def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:
         """Set lower and upper bounds on ``nodes`` (scalar, (dim,) or (dim, n_sel))."""
         cols, n = self._columns(nodes)
@@ -88,17 +101,17 @@ class Variable(cs.SX):
     def set_lower_bounds(self, lb, nodes: NodeSelection = None) -> None:
         """Set the lower bounds only."""
         cols, n = self._columns(nodes)
-        self._lb[:, cols] = self._values(lb, n, "lower bound")
+        self._write(self._lb, cols, n, lb, "lower bound")
 
     def set_upper_bounds(self, ub, nodes: NodeSelection = None) -> None:
         """Set the upper bounds only."""
         cols, n = self._columns(nodes)
-        self._ub[:, cols] = self._values(ub, n, "upper bound")
+        self._write(self._ub, cols, n, ub, "upper bound")
 
     def set_initial_guess(self, value, nodes: NodeSelection = None) -> None:
         """Set the initial guess (warm start) on ``nodes``."""
         cols, n = self._columns(nodes)
-        self._init[:, cols] = self._values(value, n, "initial guess")
+        self._write(self._init, cols, n, value, "initial guess")
 
     @property
     def lower_bounds(self) -> np.ndarray:
@@ -203,7 +216,7 @@ class Parameter(Variable):
     def assign(self, value, nodes: NodeSelection = None) -> None:
         """Assign the parameter's value on ``nodes`` (scalar, (dim,) or (dim, n_sel))."""
         cols, n = self._columns(nodes)
-        self._init[:, cols] = self._values(value, n, "value")
+        self._write(self._init, cols, n, value, "value")
 
     @property
     def values(self) -> np.ndarray:
@@ -212,3 +225,67 @@ class Parameter(Variable):
 
     def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:  # noqa: D102
         raise TypeError(f"parameter {self.name!r} has no bounds: use assign()")
+
+
+_GROUP_ARRAYS = {"lower_bounds": "_lb", "upper_bounds": "_ub", "initial_guess": "_init"}
+
+
+class VariableGroup:
+    """The variables of one kind (states, inputs, singles or parameters), their per-node
+    arrays stacked in creation order.
+
+    Each variable's bounds and initial guess (or values) are views of rows of the group's
+    arrays, so reading or writing a whole kind is one array operation: the solvers read
+    every kind once per solve, and a receding horizon shifts them every tick.
+    """
+
+    def __init__(self, n_values: int):
+        self.n_values = n_values
+        self.variables: list[Variable] = []
+        self._arrays = {what: np.zeros((0, n_values)) for what in _GROUP_ARRAYS}
+
+    def add(self, var: Variable) -> None:
+        """Append ``var``: its arrays move into the group's (their values kept)."""
+        if var.n_values != self.n_values:
+            raise ValueError(f"{var.kind} variable {var.name!r} has {var.n_values} values per "
+                             f"row; its group has {self.n_values}")
+        self.variables.append(var)
+        for what, attr in _GROUP_ARRAYS.items():
+            self._arrays[what] = np.vstack([self._arrays[what], getattr(var, attr)])
+        row = 0
+        for v in self.variables:
+            for what, attr in _GROUP_ARRAYS.items():
+                setattr(v, attr, self._arrays[what][row:row + v.dim])
+            row += v.dim
+
+    @property
+    def dim(self) -> int:
+        """Rows of the stacked arrays (the sum of the variables' dimensions)."""
+        return self._arrays["initial_guess"].shape[0]
+
+    def stacked(self, what: str = "initial_guess") -> np.ndarray:
+        """The stacked ``what`` (``initial_guess``, ``lower_bounds``, ``upper_bounds``),
+        shape (dim, n_values): the group's own array, read-only (copy it to keep or change
+        it; the variables' setters write it)."""
+        if what not in self._arrays:
+            raise KeyError(f"unknown stacked array {what!r}; arrays are: "
+                           f"{', '.join(self._arrays)}")
+        out = self._arrays[what].view()
+        out.flags.writeable = False
+        return out
+
+    def set_initial_guess(self, values: np.ndarray) -> None:
+        """Write the stacked initial guess (dim, n_values) of every variable at once."""
+        values = np.asarray(values, dtype=float)
+        if values.size == 0 and self.dim == 0:
+            return
+        if values.shape != (self.dim, self.n_values):
+            raise ValueError(f"stacked initial guess of shape {values.shape}; expected "
+                             f"{(self.dim, self.n_values)}")
+        np.copyto(self._arrays["initial_guess"], values)
+
+    def shift(self) -> None:
+        """Every variable's initial guess one node back; the last node repeats."""
+        init = self._arrays["initial_guess"]
+        if self.n_values > 1:
+            init[:, :-1] = init[:, 1:]

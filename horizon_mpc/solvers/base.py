@@ -100,12 +100,14 @@ class Solver:
         self.prb.shift()
 
     def _write_back(self) -> None:
-        for name, var in self.prb.variables.items():
-            if var.kind != "parameter" and name in self.solution:
-                var.set_initial_guess(self.solution[name])
+        """The solution becomes the problem's initial guess (one write per kind)."""
+        for kind, values in zip(("state", "input", "single"), self._stacked_solution,
+                                strict=True):
+            self.prb.set_stacked_initial_guess(kind, values)
 
     def _split_solution(self, X: np.ndarray, U: np.ndarray, S: np.ndarray) -> None:
         """Fill ``self.solution`` from stacked arrays X (nx, N+1), U (nu, N), S (ns, 1)."""
+        self._stacked_solution = (X, U, S)
         sol: dict[str, np.ndarray] = {"x": X, "u": U}
         for group, arr in ((self.prb.states, X), (self.prb.inputs, U), (self.prb.singles, S)):
             i = 0

@@ -164,6 +164,7 @@ class CompiledEvaluation:
         # the problem's data: set_problem copies into these, the C code points at them
         self._S, self._P = np.zeros(s["ns"]), np.zeros((s["N"] + 1, s["npar"]))
         self._W, self._WN = np.zeros((s["N"], s["nr"])), np.zeros(s["nrN"])
+        self._weights_set = False  # set_problem copies the weights when they change only
         self._b, self._eq = np.zeros((s["N"], s["ncon"])), np.zeros((s["N"], s["ncon"]), bool)
         self._bN, self._eqN = np.zeros(s["ncNcon"]), np.zeros(s["ncNcon"], bool)
         d.S, d.P, d.W, d.WN, d.b, d.eq, d.bN, d.eqN = (
@@ -221,20 +222,26 @@ class CompiledEvaluation:
             entry = self._stage_fns[id(fn)] = (fn, GeneratedFunction.bind(fn))
         self._quad.stage = entry[1]
 
-    def set_problem(self, S: np.ndarray, P: np.ndarray, W: np.ndarray, WN: np.ndarray,
-                    b: np.ndarray, eq: np.ndarray, bN: np.ndarray, eqN: np.ndarray) -> None:
+    def set_problem(self, S: np.ndarray, P: np.ndarray, b: np.ndarray, eq: np.ndarray,
+                    bN: np.ndarray, eqN: np.ndarray,
+                    weights: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """The data of the next evaluations: S (ns,) singles, P (npar, N+1) parameters,
-        W (N, nr) and WN (nrN,) residual weights, b and eq (N, ncon) the projected rows'
-        targets and mask, bN and eqN (ncNcon,) the terminal ones. Copied into arrays the C
-        code holds pointers to (set once); the augmented Lagrangians' bounds, multipliers
-        and penalties are read in place."""
-        for name, dst, src in (("S", self._S, np.reshape(S, -1)), ("P", self._P, P.T),
-                               ("W", self._W, W), ("WN", self._WN, WN), ("b", self._b, b),
-                               ("eq", self._eq, eq), ("bN", self._bN, bN),
-                               ("eqN", self._eqN, eqN)):
+        b and eq (N, ncon) the projected rows' targets and mask, bN and eqN (ncNcon,) the
+        terminal ones, ``weights`` W (N, nr) and WN (nrN,) the residual weights (None: the
+        last ones given; they must have been given once). Copied into arrays the C code
+        holds pointers to (set once); the augmented Lagrangians' bounds, multipliers and
+        penalties are read in place."""
+        arrays = [("S", self._S, np.reshape(S, -1)), ("P", self._P, P.T), ("b", self._b, b),
+                  ("eq", self._eq, eq), ("bN", self._bN, bN), ("eqN", self._eqN, eqN)]
+        if weights is not None:
+            arrays += [("W", self._W, weights[0]), ("WN", self._WN, weights[1])]
+        elif not self._weights_set:
+            raise ValueError("set_problem needs the residual weights the first time")
+        for name, dst, src in arrays:
             if np.shape(src) != dst.shape:
                 raise ValueError(f"{name} has shape {np.shape(src)}; expected {dst.shape}")
             np.copyto(dst, src)
+        self._weights_set |= weights is not None
         if any(a.lb is not arrays[0] for a, arrays in zip(self._al, self._al_arrays,
                                                           strict=True)):
             self._bind_multipliers()

@@ -23,13 +23,20 @@ import functools
 import logging
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from horizon_mpc.codegen import BufferedFunction, codegen_enabled, compile_function
 from horizon_mpc.problem import Problem
-from horizon_mpc.problem.terms import stacked_bounds, stacked_weights
+from horizon_mpc.problem.terms import (
+    Constraint,
+    revisions,
+    stacked_active,
+    stacked_bounds,
+    stacked_weights,
+)
 from horizon_mpc.solvers.base import Solver
 from horizon_mpc.solvers.ilqr import merit, riccati, riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
@@ -178,40 +185,53 @@ class IlqrSolver(Solver):
         else:
             self._backward, self._rollout = riccati.backward_pass, riccati.linear_rollout
         self._gains = np.zeros((N, m.nu, m.ndx))
+        self._memos: dict[str, tuple[tuple, Any]] = {}  # see _memo
+        self.Wr: np.ndarray | None = None  # (N, nr) residual weights (_gather)
+        self.WrN: np.ndarray | None = None  # (1, nrN)
         self.timings: dict[str, float] = {}
         self._prepared: tuple | None = None  # (evaluation, LQ step, info) of prepare()
 
     # ------------------------------------------------------------------ problem data
     def _gather(self) -> None:
-        """Read guesses, parameters, bounds and weights from the problem (once per solve)."""
+        """Read guesses, parameters, bounds and weights from the problem (once per solve).
+
+        The stacked bounds of the constraints and the residual weights are read again only
+        when a term's revision changed (a receding horizon moves node sets, rarely bounds
+        or weights)."""
         prb, m = self.prb, self.model
         N = m.n_nodes
-        self.X = prb.stacked("state").T.copy()  # (N+1, nx)
-        self.U = prb.stacked("input").T.copy()  # (N, nu)
+        self.X = prb.stacked("state", copy=False).T.copy()  # (N+1, nx)
+        self.U = prb.stacked("input", copy=False).T.copy()  # (N, nu)
         self.S = prb.stacked("single", "lower_bounds")  # fixed singles, (ns, 1)
-        self.P = prb.parameter_values()  # (np, N+1)
-        xlb, xub = prb.stacked("state", "lower_bounds"), prb.stacked("state", "upper_bounds")
-        ulb, uub = prb.stacked("input", "lower_bounds"), prb.stacked("input", "upper_bounds")
+        self.P = prb.stacked("parameter")  # (np, N+1)
+        xlb = prb.stacked("state", "lower_bounds", copy=False)  # read-only views
+        xub = prb.stacked("state", "upper_bounds", copy=False)
+        ulb = prb.stacked("input", "lower_bounds", copy=False)
+        uub = prb.stacked("input", "upper_bounds", copy=False)
         self.x_init = None
         if np.all(np.isfinite(xlb[:, 0])) and np.array_equal(xlb[:, 0], xub[:, 0]):
             self.x_init = xlb[:, 0].copy()
-            xlb[:, 0], xub[:, 0] = -np.inf, np.inf  # fresh arrays from stacked()
         # stage rows: constraints, then x bounds, then u bounds
         nc, ncN = m.nc_con, m.ncN_con
         lb, ub = np.empty((N, m.nc)), np.empty((N, m.nc))
         if nc:
-            clb, cub, act = stacked_bounds(m.stage_cons)  # (nc, N+1)
-            act = act[:, :N]
+            clb, cub = self._memo("stage bounds", _bounds_revisions(m.stage_cons),
+                                  lambda: stacked_bounds(m.stage_cons)[:2])
+            act = stacked_active(m.stage_cons)[:, :N]
             if self.x_init is not None:
                 # a fixed initial state cannot be changed: nothing to enforce at node 0
                 act[~self._uses_input, 0] = False
             lb[:, :nc] = np.where(act, clb[:, :N], -np.inf).T
             ub[:, :nc] = np.where(act, cub[:, :N], np.inf).T
         lb[:, nc:nc + m.nx], ub[:, nc:nc + m.nx] = xlb[:, :N].T, xub[:, :N].T
+        if self.x_init is not None:  # the fixed state is not a bound of the step
+            lb[0, nc:nc + m.nx], ub[0, nc:nc + m.nx] = -np.inf, np.inf
         lb[:, nc + m.nx:], ub[:, nc + m.nx:] = ulb.T, uub.T
         lbN, ubN = np.empty((1, m.ncN)), np.empty((1, m.ncN))
         if ncN:
-            tlb, tub, tact = stacked_bounds(m.term_cons)
+            tlb, tub = self._memo("terminal bounds", _bounds_revisions(m.term_cons),
+                                  lambda: stacked_bounds(m.term_cons)[:2])
+            tact = stacked_active(m.term_cons)
             lbN[0, :ncN] = np.where(tact[:, N], tlb[:, N], -np.inf)
             ubN[0, :ncN] = np.where(tact[:, N], tub[:, N], np.inf)
         lbN[0, ncN:], ubN[0, ncN:] = xlb[:, N], xub[:, N]
@@ -226,14 +246,40 @@ class IlqrSolver(Solver):
         self._al.set_bounds(lb, ub)
         self._alN.set_bounds(lbN, ubN)
         self._choose_quadratisation(lb[:, :m.nc_con], ub[:, :m.nc_con])
-        self.Wr = stacked_weights(m.stage_costs)[:, :N].T if m.stage_costs else np.zeros(
-            (N, 0))  # (N, nr)
-        self.WrN = stacked_weights(m.term_costs)[:, N:].T if m.term_costs else np.zeros(
-            (1, 0))  # (1, nrN)
+        weights = self.Wr, self.WrN
+        self.Wr, self.WrN = self._memo("weights", (revisions(m.stage_costs),
+                                                   revisions(m.term_costs)), self._weights)
         if self._compiled_eval is not None:
             lay = self._layout
-            self._compiled_eval.set_problem(self.S, self.P, self.Wr, self.WrN[0], lay.b,
-                                            self._eq_rows, lay.bN, lay.term)
+            self._compiled_eval.set_problem(
+                self.S, self.P, lay.b, self._eq_rows, lay.bN, lay.term,
+                None if weights[0] is self.Wr and weights[1] is self.WrN
+                else (self.Wr, self.WrN[0]))
+
+    def _weights(self) -> tuple[np.ndarray, np.ndarray]:
+        """The residual weights per node, Wr (N, nr) and WrN (1, nrN) (0 where inactive)."""
+        m, N = self.model, self.model.n_nodes
+        out = []
+        for name, costs, nodes, empty in (("stage", m.stage_costs, slice(0, N), (N, 0)),
+                                          ("terminal", m.term_costs, slice(N, N + 1), (1, 0))):
+            if not costs:
+                out.append(np.zeros(empty))
+                continue
+            # the rows' weights change more rarely than the costs' nodes
+            w = self._memo(f"{name} weight rows", tuple(c.weight_revision for c in costs),
+                           lambda costs=costs: np.concatenate([c.weight for c in costs]))
+            out.append(stacked_weights(costs, w)[:, nodes].T)
+        return out[0], out[1]
+
+    def _memo(self, name: str, key: tuple, compute: Callable[[], Any]) -> Any:
+        """``compute()``, or its value of the last call with the same ``key`` (the value is
+        shared: never written in place)."""
+        hit = self._memos.get(name)
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        value = compute()
+        self._memos[name] = (key, value)
+        return value
 
     def _choose_quadratisation(self, lb: np.ndarray, ub: np.ndarray) -> None:
         """The lean quadratisation (no AL terms for the projected equalities) unless a row it
@@ -647,3 +693,7 @@ class IlqrSolver(Solver):
         self._al.reset()
         self._alN.reset()
         self.mu = self.opts["mu_init"]
+
+
+def _bounds_revisions(constraints: list[Constraint]) -> tuple[int, ...]:
+    return tuple(c.bounds_revision for c in constraints)
