@@ -47,8 +47,11 @@ Aggregate: ``<out>.json`` (default ``bench/results/closed_loop.json``: every run
 the targets of the issues and whether each run meets them), ``<out>.png`` (stacked mean
 breakdown per run with the tick percentiles), and a table on stdout. go2's tick is compared
 with Crocoddyl's per-iteration time on the same robot: ``--peer`` runs the peer
-(``bench/bench_ilqr.py``'s, with ``.venv-peer``) before and after the runs; otherwise the
-figure is read from ``bench/results/ilqr.json`` and labelled as that file's run.
+(``bench/bench_ilqr.py``'s, with ``.venv-peer``) before every run and after the last, and
+each run's ratio is taken against the two rounds around it (this machine's speed drifts by
+tens of percent over minutes: the peer measured 8-14 ms per iteration in one sitting), with
+the ratio against every round of the run beside it; otherwise the figure is read from
+``bench/results/ilqr.json`` and labelled as that file's run.
 
 Diagnostics: ``--realtime-factor F`` and ``--state-rate HZ`` override sim_node's parameters
 in the real-time runs (e.g. a slower simulator gives the MPC more wall time per period).
@@ -723,11 +726,24 @@ def compact(name: str, summary: dict) -> dict:
     }
 
 
+def adjacent_crocoddyl_ms(croc: dict, name: str) -> float | None:
+    """The mean of Crocoddyl's per-iteration times (ms) in the peer rounds right before and
+    after run ``name`` (None when those were not measured)."""
+    idx = (croc.get("adjacent_rounds") or {}).get(name)
+    if not idx:
+        return None
+    return float(np.mean([croc["rounds"][i]["ms_per_iteration"] for i in idx]))
+
+
 def targets_status(run_: dict, croc: dict) -> dict:
     """Each target of the issues against one run: value, target, met. The tick target (a
-    third of Crocoddyl's iteration on the same robot) exists for go2 only (the peer's)."""
+    third of Crocoddyl's iteration on the same robot) exists for go2 only (the peer's); its
+    reference is the peer rounds right around the run when measured (the machine's speed
+    drifts over minutes), else every round of the run."""
     t = run_["tick_ms"]
-    croc_ms = croc.get("ms_per_iteration") if run_["robot"] == PEER_ROBOT else None
+    croc_ms = None
+    if run_["robot"] == PEER_ROBOT:
+        croc_ms = adjacent_crocoddyl_ms(croc, run_["run"]) or croc.get("ms_per_iteration")
     rmse = [v for s in run_["segments"] if s["rmse"] for v in s["rmse"].values()]
     out = {
         "median_tick_ms": {"value": t["median"],
@@ -753,7 +769,11 @@ def targets_status(run_: dict, croc: dict) -> dict:
             v <= tgt if key in upper else v >= tgt * (1 - RATE_TOLERANCE))
         entry["met"] = ok
     if croc_ms:
+        out["median_tick_ms"]["crocoddyl_ms_per_iteration"] = croc_ms
         out["median_tick_ms"]["over_crocoddyl_iteration"] = t["median"] / croc_ms
+        if croc.get("ms_per_iteration"):
+            out["median_tick_ms"]["over_crocoddyl_iteration_all_rounds"] = (
+                t["median"] / croc["ms_per_iteration"])
         cpu = croc.get("cpu_ms_per_iteration")
         out["median_tick_ms"]["cpu_over_crocoddyl_cpu_iteration"] = (
             run_["tick_cpu_ms"]["median"] / cpu if cpu else None)
@@ -874,7 +894,10 @@ def table(agg: dict) -> str:
             m = st["median_tick_ms"]
             if "over_crocoddyl_iteration" in m:
                 lines.append(f"{name}: median tick / Crocoddyl iteration = "
-                             f"{_f(m['over_crocoddyl_iteration'], '.2f')} wall, "
+                             f"{_f(m['over_crocoddyl_iteration'], '.2f')} wall against the "
+                             f"rounds around it ({_f(m['crocoddyl_ms_per_iteration'])} ms), "
+                             f"{_f(m.get('over_crocoddyl_iteration_all_rounds'), '.2f')} "
+                             f"against all rounds, "
                              f"{_f(m.get('cpu_over_crocoddyl_cpu_iteration'), '.2f')} CPU "
                              f"(target <= 0.33)")
     else:
@@ -1047,16 +1070,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             except (RuntimeError, subprocess.TimeoutExpired) as exc:
                 python, reason = None, str(exc)
 
-    peer()
-    runs = {}
+    # a peer round before every run and after the last: each run is compared with the
+    # rounds right around it too (this machine's speed drifts over minutes)
+    runs, adjacent = {}, {}
     for name, robot, mode, gif in plan_runs(args):
+        peer()
+        first = len(rounds) - 1
         print(f"[{name}] {robot} {mode} (load {machine_load()})", flush=True)  # noqa: T201
         out = args.out / name
         runs[name] = (run_isolated(robot, mode, args, out, gif) if args.isolate else
                       measure(robot, mode, args.duration, gif, out, args.iterations,
                               sim_parameters(args, mode)))
+        adjacent[name] = [first, first + 1]
     peer()
     croc = crocoddyl_reference(rounds if python else (), reason)
+    if python and croc.get("rounds"):
+        croc["adjacent_rounds"] = {n: [i for i in idx if 0 <= i < len(croc["rounds"])]
+                                   for n, idx in adjacent.items()}
     agg = aggregate(runs, croc, args, {"start": load0, "end": machine_load()})
     agg = bench_ilqr.jsonable(agg)
     path = args.out.with_suffix(".json")

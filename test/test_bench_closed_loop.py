@@ -146,3 +146,27 @@ def test_a_tiny_realtime_run_brings_the_mpc_process_figures_back(tmp_path):
     assert summary["mpc_process"]["exit_code"] == 0
     assert {"ticks.csv", "tick_breakdown.png", "mpc_node.log"} <= {
         p.name for p in (tmp_path / "go2").iterdir()}
+
+
+def test_a_runs_tick_is_compared_with_the_peer_rounds_around_it():
+    """With a peer round before every run and after the last, a run's ratio uses the two
+    rounds around it; the ratio against every round is kept beside it."""
+    croc = {"ms_per_iteration": 10.0, "cpu_ms_per_iteration": 10.0,
+            "rounds": [{"ms_per_iteration": 8.0}, {"ms_per_iteration": 12.0},
+                       {"ms_per_iteration": 14.0}],
+            "adjacent_rounds": {"go2": [0, 1], "go2_r2": [1, 2]}}
+    assert bench.adjacent_crocoddyl_ms(croc, "go2") == 10.0
+    assert bench.adjacent_crocoddyl_ms(croc, "go2_r2") == 13.0
+    assert bench.adjacent_crocoddyl_ms(croc, "solo12") is None
+    run = {"run": "go2_r2", "robot": "go2", "tick_ms": {"median": 3.9},
+           "tick_cpu_ms": {"median": 3.8}, "p99_over_median": 1.5,
+           "memory_mb": {"peak": 200.0}, "segments": [], "real_time_factor": 1.0,
+           "control_periods": {"rate_hz": 50.0}, "deadline_misses": {"percent": 0.0}}
+    m = bench.targets_status(run, croc)["median_tick_ms"]
+    assert m["crocoddyl_ms_per_iteration"] == 13.0 and m["target"] == pytest.approx(13.0 / 3)
+    assert m["over_crocoddyl_iteration"] == pytest.approx(0.3)
+    assert m["over_crocoddyl_iteration_all_rounds"] == pytest.approx(0.39)
+    assert m["met"] is True
+    del croc["adjacent_rounds"]  # the rounds were not paired with runs: all of them
+    m = bench.targets_status(run, croc)["median_tick_ms"]
+    assert m["over_crocoddyl_iteration"] == pytest.approx(0.39) and m["met"] is False
