@@ -31,6 +31,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
 from horizon_mpc.closed_loop_profile import (
@@ -187,7 +188,8 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
                   mpc_parameters: Mapping[str, object] | None = None) -> Recording:
     """One process, one executor: the simulator waits for each plan (deterministic)."""
     ctx = rclpy.Context()
-    rclpy.init(context=ctx)
+    # Ctrl-C: KeyboardInterrupt in this thread (see _run_realtime)
+    rclpy.init(context=ctx, signal_handler_options=SignalHandlerOptions.NO)
     rec = loop.rec
     try:
         t_build = time.perf_counter()
@@ -256,7 +258,11 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
     t_start = time.perf_counter()
     with MpcProcess(robot, iterations, domain_id, mpc_parameters, mpc_command) as child:
         ctx = rclpy.Context()
-        rclpy.init(context=ctx, domain_id=child.domain_id)
+        # Ctrl-C is Python's KeyboardInterrupt here, raised in this thread: rclpy's handlers
+        # would shut the context down from their own thread, racing the node creation of
+        # this thread (a closed loop interrupted while starting once hung until killed)
+        rclpy.init(context=ctx, domain_id=child.domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)
         try:
             sim = SimNode(context=ctx, parameter_overrides=[
                 Parameter("robot", value=robot), Parameter("lockstep", value=False),
