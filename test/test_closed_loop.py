@@ -3,6 +3,7 @@ the acceptance tests) and real time (mpc_node in a process of its own)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -323,11 +324,15 @@ def _start_cli_and_wait_for_its_child(tmp_path: Path) -> tuple[subprocess.Popen,
     """``closed_loop --mode realtime`` for a long profile; returns it and its MPC process."""
     profile = tmp_path / "long.yaml"
     profile.write_text("- {duration: 60.0}\n")
-    parent = subprocess.Popen(
-        [sys.executable, "-m", "horizon_mpc.closed_loop", "--mode", "realtime", "--no-gif",
-         "--profile", str(profile), "--out", str(tmp_path / "out")],
-        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    # stderr to a file (a pipe nobody reads could fill and block the parent); with the
+    # fault handler, SIGABRT makes it write every thread's stack there (see _stop_or_dump)
+    with (tmp_path / "closed_loop.stderr").open("w") as err:
+        parent = subprocess.Popen(
+            [sys.executable, "-m", "horizon_mpc.closed_loop", "--mode", "realtime",
+             "--no-gif", "--profile", str(profile), "--out", str(tmp_path / "out")],
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path),
+                 "PYTHONFAULTHANDLER": "1"},
+            stdout=subprocess.DEVNULL, stderr=err)
     deadline = time.monotonic() + 120
     children: list[int] = []
     while not children and time.monotonic() < deadline and parent.poll() is None:
@@ -346,7 +351,7 @@ def test_no_mpc_process_outlives_a_stopped_or_killed_closed_loop(tmp_path, sig):
     parent, child = _start_cli_and_wait_for_its_child(tmp_path)
     try:
         parent.send_signal(sig)
-        parent.wait(timeout=60)
+        _wait_or_dump(parent, 60, tmp_path / "closed_loop.stderr")
         deadline = time.monotonic() + 30
         while process_exists(child) and time.monotonic() < deadline:
             time.sleep(0.1)
@@ -356,6 +361,19 @@ def test_no_mpc_process_outlives_a_stopped_or_killed_closed_loop(tmp_path, sig):
             if process_exists(pid):
                 os.kill(pid, signal.SIGKILL)
         parent.wait(timeout=10)
+
+
+def _wait_or_dump(proc: subprocess.Popen, timeout: float, stderr: Path) -> None:
+    """Wait for ``proc``; if it does not exit in time, make it dump its threads' stacks
+    (SIGABRT, fault handler on) and fail with the end of its stderr."""
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGABRT)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            proc.wait(timeout=10)
+        pytest.fail(f"the closed loop did not exit within {timeout:g} s; its stderr ends "
+                    f"with:\n{stderr.read_text(errors='replace')[-6000:]}")
 
 
 def _zombie(pid: int) -> bool:
