@@ -18,7 +18,9 @@ import argparse
 import logging
 import math
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -258,9 +260,8 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
     t_start = time.perf_counter()
     with MpcProcess(robot, iterations, domain_id, mpc_parameters, mpc_command) as child:
         ctx = rclpy.Context()
-        # Ctrl-C is Python's KeyboardInterrupt here, raised in this thread: rclpy's handlers
-        # would shut the context down from their own thread, racing the node creation of
-        # this thread (a closed loop interrupted while starting once hung until killed)
+        # Ctrl-C is Python's KeyboardInterrupt here, raised in this thread (rclpy's handlers
+        # would shut the context down from a thread of their own): the cleanup below runs
         rclpy.init(context=ctx, domain_id=child.domain_id,
                    signal_handler_options=SignalHandlerOptions.NO)
         try:
@@ -383,6 +384,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = ap.parse_args(remove_ros_args(["closed_loop", *argv])[1:])  # tolerate --ros-args
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    if threading.current_thread() is threading.main_thread():
+        # Ctrl-C / SIGINT stops the run and its MPC process, also when this process was
+        # started with SIGINT ignored (a background job of a non-interactive shell inherits
+        # that, and Python keeps it: the run would go on, deaf to SIGINT)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     # DDS discovery on this host only, for this process and the MPC process alike
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     profile = args.profile or DEFAULT_PROFILE  # an empty --profile (launch default) = default
