@@ -37,7 +37,6 @@ from horizon_mpc.problem.variables import (
 
 __all__ = ["Problem"]
 
-# Problem.stacked: what -> the Variable array it reads
 log = logging.getLogger(__name__)
 
 TRANSCRIPTIONS = ("multiple_shooting", "direct_collocation")
@@ -447,7 +446,7 @@ class Problem:
 
     def parameter_values(self) -> np.ndarray:
         """Stacked parameter values, shape (np, N+1)."""
-        return self._groups["parameter"].stacked().copy()
+        return self.stacked("parameter")
 
     def stacked(self, kind: str, what: str = "initial_guess", copy: bool = True) -> np.ndarray:
         """Stack ``what`` (initial_guess, lower_bounds, upper_bounds) of a variable kind.

@@ -201,9 +201,11 @@ def stacked_weights(costs: list[Cost], weights: np.ndarray | None = None) -> np.
     return stacked_active(costs) * weights[:, None]
 
 
-def revisions(terms: list[Term]) -> tuple[int, ...]:
-    """The revisions of ``terms``: equal tuples mean nothing in them changed in between."""
-    return tuple(t.revision for t in terms)
+def revisions(terms: list[Term], which: str = "revision") -> tuple[int, ...]:
+    """The revisions of ``terms``: equal tuples mean nothing in them changed in between.
+    ``which``: ``revision`` (anything), ``bounds_revision`` (constraints' bounds) or
+    ``weight_revision`` (costs' weights)."""
+    return tuple(getattr(t, which) for t in terms)
 
 
 def stacked_active(terms: list[Term]) -> np.ndarray:

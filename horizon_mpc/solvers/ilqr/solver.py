@@ -31,7 +31,6 @@ import numpy as np
 from horizon_mpc.codegen import BufferedFunction, codegen_enabled, compile_function
 from horizon_mpc.problem import Problem
 from horizon_mpc.problem.terms import (
-    Constraint,
     revisions,
     stacked_active,
     stacked_bounds,
@@ -215,7 +214,7 @@ class IlqrSolver(Solver):
         nc, ncN = m.nc_con, m.ncN_con
         lb, ub = np.empty((N, m.nc)), np.empty((N, m.nc))
         if nc:
-            clb, cub = self._memo("stage bounds", _bounds_revisions(m.stage_cons),
+            clb, cub = self._memo("stage bounds", revisions(m.stage_cons, "bounds_revision"),
                                   lambda: stacked_bounds(m.stage_cons)[:2])
             act = stacked_active(m.stage_cons)[:, :N]
             if self.x_init is not None:
@@ -229,7 +228,7 @@ class IlqrSolver(Solver):
         lb[:, nc + m.nx:], ub[:, nc + m.nx:] = ulb.T, uub.T
         lbN, ubN = np.empty((1, m.ncN)), np.empty((1, m.ncN))
         if ncN:
-            tlb, tub = self._memo("terminal bounds", _bounds_revisions(m.term_cons),
+            tlb, tub = self._memo("terminal bounds", revisions(m.term_cons, "bounds_revision"),
                                   lambda: stacked_bounds(m.term_cons)[:2])
             tact = stacked_active(m.term_cons)
             lbN[0, :ncN] = np.where(tact[:, N], tlb[:, N], -np.inf)
@@ -266,7 +265,7 @@ class IlqrSolver(Solver):
                 out.append(np.zeros(empty))
                 continue
             # the rows' weights change more rarely than the costs' nodes
-            w = self._memo(f"{name} weight rows", tuple(c.weight_revision for c in costs),
+            w = self._memo(f"{name} weight rows", revisions(costs, "weight_revision"),
                            lambda costs=costs: np.concatenate([c.weight for c in costs]))
             out.append(stacked_weights(costs, w)[:, nodes].T)
         return out[0], out[1]
@@ -693,7 +692,3 @@ class IlqrSolver(Solver):
         self._al.reset()
         self._alN.reset()
         self.mu = self.opts["mu_init"]
-
-
-def _bounds_revisions(constraints: list[Constraint]) -> tuple[int, ...]:
-    return tuple(c.bounds_revision for c in constraints)
