@@ -661,3 +661,81 @@ def test_the_trajectory_message_is_refilled_with_each_plan():
     assert len(fill_trajectory(msg, plan(2, nodes=2), names, 4, 0).points) == 2
     third = fill_trajectory(msg, plan(3, nj=2), ["a", "b"], 4, 0)
     assert list(third.joint_names) == ["a", "b"] and len(third.points[0].effort) == 2
+
+
+# ---------------------------------------------------------------------- model and horizon
+def test_robot_model_comes_from_robot_description_then_urdf_path_then_the_config():
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.nodes.mpc_node import robot_model
+    from horizon_mpc.robots import example_robot_files
+
+    cfg = load_robot_config("go2")
+    urdf = example_robot_files("go2").urdf
+    solo = example_robot_files("solo12").urdf
+    assert robot_model(cfg) is None  # nothing asked: WalkingMpc builds the config's model
+    from_file = robot_model(cfg, urdf_path=str(urdf))
+    assert from_file.nq == 19 and from_file.joint_names[0].startswith("FL_")
+    # robot_description wins over urdf_path (here: another robot's file)
+    from_text = robot_model(cfg, urdf_path=str(solo), robot_description=urdf.read_text())
+    assert from_text.joint_names == from_file.joint_names
+    with pytest.raises(ValueError, match="urdf_path"):
+        robot_model(cfg, robot_description=str(urdf))  # a path is not URDF text
+    with pytest.raises(FileNotFoundError, match="no_such.urdf"):
+        robot_model(cfg, urdf_path="/tmp/no_such.urdf")
+
+
+def test_the_node_plans_with_the_robot_description_it_is_given(context):
+    from horizon_mpc.robots import example_robot_files
+
+    text = example_robot_files("go2").urdf.read_text()
+    node = MpcNode(parameter_overrides=[Parameter("trigger", value="state"),
+                                        Parameter("use_sim_time", value=True),
+                                        Parameter("robot_description", value=text)],
+                   context=context)
+    try:
+        assert node.get_parameter("robot_description").value == text
+        assert node.mpc.model.pin_model.nq == 19
+        out = drive_in_sim_time(node, 3)
+        assert len(out["traj"]) == 3
+        assert list(out["traj"][-1].joint_names) == node.joint_names
+    finally:
+        node.destroy_node()
+
+
+def test_a_foot_the_urdf_does_not_have_is_named_at_startup(context):
+    from horizon_mpc.robots import example_robot_files
+
+    solo = str(example_robot_files("solo12").urdf)  # go2's config names go2's feet
+    with pytest.raises(KeyError, match="FL_foot"):
+        MpcNode(parameter_overrides=[Parameter("urdf_path", value=solo)], context=context)
+
+
+def test_horizon_nodes_and_dt_are_parameters_with_the_config_defaults(context, walking_mpc):
+    node = sim_time_node(context, walking_mpc)
+    try:
+        st_ = walking_mpc.settings
+        assert node.get_parameter("n_nodes").value == st_.n_nodes
+        assert node.get_parameter("dt").value == st_.dt
+        assert node.get_parameter("control_rate").value == pytest.approx(1 / st_.dt)
+    finally:
+        node.destroy_node()
+    with pytest.raises(ValueError, match="n_nodes/dt"):
+        sim_time_node(context, walking_mpc, n_nodes=st_.n_nodes + 4)
+
+
+@pytest.mark.slow
+def test_a_node_built_with_another_horizon_plans_over_it(context):
+    node = MpcNode(parameter_overrides=[Parameter("trigger", value="state"),
+                                        Parameter("use_sim_time", value=True),
+                                        Parameter("n_nodes", value=16),
+                                        Parameter("dt", value=0.025)], context=context)
+    try:
+        assert (node.mpc.wp.n_nodes, node.mpc.settings.dt) == (16, 0.025)
+        assert node.get_parameter("control_rate").value == pytest.approx(40.0)
+        out = drive_in_sim_time(node, 3, period_ns=25_000_000)
+        points = out["traj"][-1].points
+        assert len(points) == 6
+        assert points[1].time_from_start.nanosec == 25_000_000
+        assert node.plan.q.shape == (19, 17)
+    finally:
+        node.destroy_node()

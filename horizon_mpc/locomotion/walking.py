@@ -86,7 +86,7 @@ def build_walking_problem(model: RobotModel, cfg: RobotConfig,
     """Build the walking OCP for ``model`` with the robot config ``cfg``."""
     st = settings or MpcSettings.from_dict(cfg.section("mpc"))
     feet = list(cfg.feet)
-    _, q_nom = standing_configuration(cfg)
+    _, q_nom = standing_configuration(cfg, model.pin_model)  # the model's own joints
     h_nom = float(q_nom[2]) if st.base_height is None else float(st.base_height)
     mu = cfg.friction if st.friction is None else st.friction
 

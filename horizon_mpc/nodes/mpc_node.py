@@ -16,6 +16,7 @@ import sys
 import time
 from collections import deque
 from collections.abc import Sequence
+from pathlib import Path as FilePath
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -26,8 +27,9 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from horizon_mpc.config import load_robot_config
+from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings
+from horizon_mpc.model import RobotModel
 from horizon_mpc.mpc.controller import Plan, WalkingMpc
 from horizon_mpc.nodes.conversions import NS_PER_S, time_to_ns
 from horizon_mpc.nodes.mpc_inputs import (
@@ -45,7 +47,7 @@ from horizon_mpc.nodes.mpc_outputs import (
 from horizon_mpc.nodes.mpc_parameters import LIVE_LIMITS, MpcParameters
 from horizon_mpc.nodes.spin import spin_until_signal
 
-__all__ = ["MpcNode", "main"]
+__all__ = ["MpcNode", "main", "robot_model"]
 
 _WARN_PERIOD = 2.0  # s (wall) between two warnings of the same kind
 _RECENT_STATES = 8  # joint_states / odom messages kept to pair them by stamp
@@ -68,9 +70,19 @@ class MpcNode(MpcParameters, Node):
                          **kwargs)
         self._declare("robot", "go2", "robot config name (config/<robot>.yaml)", ro=True)
         self._declare("config", "", "path of a robot config YAML (overrides 'robot')", ro=True)
+        self._declare("urdf_path", "", "URDF file of the robot model (overrides the config's "
+                      "URDF; the config still gives feet, posture, gains, weights)", ro=True)
+        self._declare("robot_description", "", "URDF XML text of the robot model, as "
+                      "robot_state_publisher's parameter (overrides urdf_path)", ro=True)
         cfg = load_robot_config(self._p("config") or self._p("robot"))
-        settings = mpc.settings if mpc is not None else MpcSettings.from_dict(cfg.section("mpc"))
+        settings = (mpc.settings if mpc is not None
+                    else MpcSettings.from_dict(cfg.section("mpc")))
         self._declare_parameters(settings)
+        horizon = (int(self._p("n_nodes")), float(self._p("dt")))
+        if mpc is not None and horizon != (settings.n_nodes, settings.dt):
+            raise ValueError(f"n_nodes/dt {horizon} differ from those of the given MPC "
+                             f"({settings.n_nodes}, {settings.dt}): build it with them")
+        settings.n_nodes, settings.dt = horizon
         g = settings.gait
         g.name, g.step_duration = self._p("gait"), self._p("step_duration")
         g.step_height, g.duty_factor = self._p("step_height"), self._p("duty_factor")
@@ -81,7 +93,9 @@ class MpcNode(MpcParameters, Node):
 
         t = time.perf_counter()
         if mpc is None:
-            mpc = WalkingMpc(cfg, settings=settings, iterations=self._p("iterations"))
+            model = robot_model(cfg, str(self._p("urdf_path")),
+                                str(self._p("robot_description")))
+            mpc = WalkingMpc(cfg, model, settings=settings, iterations=self._p("iterations"))
         else:
             mpc.set_gait(g.name, g.step_duration, g.step_height, g.duty_factor)
             mpc.wp.set_weights(settings.weights)
@@ -373,6 +387,29 @@ class MpcNode(MpcParameters, Node):
         }
         self._solve_time_max = 0.0
         self._pub_diag.publish(self._diag.filled(stamp_ns, level, message, values))
+
+
+def robot_model(cfg: RobotConfig, urdf_path: str = "",
+                robot_description: str = "") -> RobotModel | None:
+    """The robot model the parameters ask for: from ``robot_description`` (URDF XML) if
+    given, else from the file ``urdf_path``, else None (the config's own model).
+
+    Raises:
+        ValueError: ``robot_description`` is not URDF XML, or a URDF cannot be parsed.
+        FileNotFoundError: ``urdf_path`` does not exist.
+    """
+    if robot_description.strip():
+        if "<robot" not in robot_description:
+            raise ValueError("robot_description must be the URDF XML text (no <robot> "
+                             f"element in {robot_description[:60]!r}); for a file, set "
+                             "urdf_path")
+        return RobotModel.from_urdf(robot_description, name=cfg.robot or None)
+    if urdf_path.strip():
+        path = FilePath(urdf_path).expanduser()
+        if not path.is_file():
+            raise FileNotFoundError(f"urdf_path {urdf_path!r}: no such file")
+        return RobotModel.from_urdf(path, name=cfg.robot or None)
+    return None
 
 
 def with_sim_time_default(argv: Sequence[str]) -> list[str]:

@@ -53,8 +53,13 @@ class MpcParameters:
 
     def _declare_parameters(self, st: MpcSettings) -> None:
         d = self._declare
-        d("control_rate", 1.0 / st.dt, "MPC ticks per second of the node clock (trigger timer)",
-          _range(1, 1000), ro=True)
+        d("n_nodes", int(st.n_nodes), "horizon nodes (intervals) of the walking problem "
+          "(default: the config's mpc.n_nodes)", irng=[IntegerRange(
+            from_value=2, to_value=500, step=1)], ro=True)
+        d("dt", float(st.dt), "duration of one horizon node (s; default: the config's "
+          "mpc.dt)", _range(0.001, 0.5), ro=True)
+        d("control_rate", 1.0 / float(self._p("dt")), "MPC ticks per second of the node "
+          "clock (trigger timer; default: 1 / dt)", _range(1, 1000), ro=True)
         d("iterations", int(st.iterations), "ILQR iterations per tick (default: the config's "
           "mpc.iterations)", irng=[IntegerRange(
             from_value=1, to_value=50, step=1)], ro=True)
