@@ -739,3 +739,28 @@ def test_a_node_built_with_another_horizon_plans_over_it(context):
         assert node.plan.q.shape == (19, 17)
     finally:
         node.destroy_node()
+
+
+def test_time_outs_and_the_idle_stance_change_live(harness):
+    h = harness()
+    assert h.node.mpc.scheduler.stand_when_idle  # the config's default
+    res = h.node.set_parameters([Parameter("cmd_timeout", value=0.05),
+                                 Parameter("state_timeout", value=3.0),
+                                 Parameter("stand_when_idle", value=False)])
+    assert all(r.successful for r in res)
+    assert (h.node.cmd_timeout, h.node.state_timeout) == (0.05, 3.0)
+    assert not h.node.mpc.scheduler.stand_when_idle and not h.node.mpc.settings.stand_when_idle
+    # a command older than the new time-out is zero; a 1 s old state is planned from now
+    h.pub_cmd.publish(twist(0.3, 0.0, 0.0))
+    h.spin_until(lambda: h.node._cmd is not None)
+    time.sleep(0.1)
+    np.testing.assert_array_equal(h.node.command, [0.0, 0.0, 0.0])
+    h.publish_state(age=1.0)
+    h.spin_until(lambda: h.trajectories)
+    assert h.node.stale_skips == 0
+    # stepping in place with a zero command: some foot lifts within the horizon
+    h.publish_state()
+    h.spin_until(lambda: len(h.trajectories) >= 2)
+    assert not h.node.plan.stance.all()
+    assert not h.node.set_parameters([Parameter("cmd_timeout", value=-1.0)])[0].successful
+    h.node.set_parameters([Parameter("stand_when_idle", value=True)])

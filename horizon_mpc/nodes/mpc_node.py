@@ -87,6 +87,7 @@ class MpcNode(MpcParameters, Node):
         g.name, g.step_duration = self._p("gait"), self._p("step_duration")
         g.step_height, g.duty_factor = self._p("step_height"), self._p("duty_factor")
         settings.max_velocity = [self._p(n) for n in LIVE_LIMITS]
+        settings.stand_when_idle = bool(self._p("stand_when_idle"))
         settings.prepare_ahead = bool(self._p("prepare_ahead"))
         settings.max_extrapolation = float(self._p("max_extrapolation"))
         settings.weights = self._weights_from_parameters(settings.weights)
@@ -98,6 +99,7 @@ class MpcNode(MpcParameters, Node):
             mpc = WalkingMpc(cfg, model, settings=settings, iterations=self._p("iterations"))
         else:
             mpc.set_gait(g.name, g.step_duration, g.step_height, g.duty_factor)
+            mpc.scheduler.stand_when_idle = settings.stand_when_idle
             mpc.wp.set_weights(settings.weights)
         self.mpc = mpc
         self.get_logger().info(

@@ -88,6 +88,8 @@ class MpcParameters:
             value = getattr(st.weights, name)
             value = [float(x) for x in value] if isinstance(value, list) else float(value)
             d(f"w_{name}", value, f"cost weight '{name}' (see MpcSettings.weights); live")
+        d("stand_when_idle", bool(st.stand_when_idle), "zero command: the feet stay down "
+          "(true) or the gait keeps stepping in place (false); live")
         d("cmd_timeout", 0.5, "a cmd_vel older than this (s, node clock) means zero command",
           _range(0.01, 60))
         d("state_timeout", 0.2, "no plan from a state older than this (s, node clock)",
@@ -116,7 +118,8 @@ class MpcParameters:
         return dataclasses.replace(base, **values)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        """Validate and apply live changes (gait, limits, weights) between two ticks."""
+        """Validate and apply live changes (gait, limits, weights, idle stance, time-outs)
+        between two ticks."""
         new = {p.name: p.value for p in params}
         for name, value in new.items():
             if name == "gait" and value not in GAITS:
@@ -140,6 +143,11 @@ class MpcParameters:
                 return SetParametersResult(successful=False, reason=str(exc))
         if any(n in new for n in LIVE_LIMITS):
             st.max_velocity = [float(new.get(n, self._p(n))) for n in LIVE_LIMITS]
+        if "stand_when_idle" in new:
+            st.stand_when_idle = self.mpc.scheduler.stand_when_idle = bool(new["stand_when_idle"])
+        # read by the node at every tick / command
+        self.cmd_timeout = float(new.get("cmd_timeout", self.cmd_timeout))
+        self.state_timeout = float(new.get("state_timeout", self.state_timeout))
         if any(n.startswith("w_") for n in new):
             st.weights = self._weights_from_parameters(st.weights, new)
             self.mpc.wp.set_weights(st.weights)
