@@ -764,3 +764,13 @@ def test_time_outs_and_the_idle_stance_change_live(harness):
     assert not h.node.plan.stance.all()
     assert not h.node.set_parameters([Parameter("cmd_timeout", value=-1.0)])[0].successful
     h.node.set_parameters([Parameter("stand_when_idle", value=True)])
+
+
+def test_a_node_that_cannot_start_says_why_in_one_line_and_exits_1():
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    out = subprocess.run([sys.executable, "-m", "horizon_mpc.nodes.mpc_node", "--ros-args",
+                          "-p", "robot:=spot"], env=env, capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 1
+    assert "cannot start: no robot config 'spot'; available:" in out.stderr + out.stdout
+    assert "Traceback" not in out.stderr

@@ -7,6 +7,7 @@ import threading
 from collections.abc import Callable, Sequence
 
 import rclpy
+import rclpy.logging
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -17,6 +18,9 @@ __all__ = ["spin_until_signal"]
 def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None = None) -> int:
     """Create the node with ``make_node`` and spin it until SIGINT/SIGTERM; returns 0.
 
+    A node that cannot be built from its parameters (``make_node`` raises ValueError,
+    KeyError or OSError: unknown robot, missing URDF, a foot the URDF lacks, ...) is
+    reported in one fatal log line that names the problem, and the exit code is 1.
     The signals only set a flag that the spin loop checks (rclpy's own handlers would shut
     the context down under a running executor, which can surface as an RCLError).
     """
@@ -27,7 +31,13 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
     node: Node | None = None
     executor = SingleThreadedExecutor()
     try:
-        node = make_node()
+        try:
+            node = make_node()
+        except (ValueError, KeyError, OSError) as exc:
+            message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+            rclpy.logging.get_logger("horizon_mpc").fatal(
+                f"cannot start: {message} ({type(exc).__name__})")
+            return 1
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
