@@ -433,6 +433,11 @@ class WalkingMpc:
                                         None if name in ("stand",) else g.duty_factor,
                                         len(self.wp.feet))
 
+    def set_stand_when_idle(self, stand: bool) -> None:
+        """With a zero command, keep the feet down (True) or keep the gait stepping in place
+        (False); takes effect at the next tick."""
+        self.settings.stand_when_idle = self.scheduler.stand_when_idle = bool(stand)
+
 
 def _stats_dict(stats: SolverStats) -> dict:
     """``stats.as_dict()`` without the iteration history (and without copying it)."""

@@ -99,7 +99,7 @@ class MpcNode(MpcParameters, Node):
             mpc = WalkingMpc(cfg, model, settings=settings, iterations=self._p("iterations"))
         else:
             mpc.set_gait(g.name, g.step_duration, g.step_height, g.duty_factor)
-            mpc.scheduler.stand_when_idle = settings.stand_when_idle
+            mpc.set_stand_when_idle(settings.stand_when_idle)
             mpc.wp.set_weights(settings.weights)
         self.mpc = mpc
         self.get_logger().info(
@@ -401,16 +401,14 @@ def robot_model(cfg: RobotConfig, urdf_path: str = "",
         FileNotFoundError: ``urdf_path`` does not exist.
     """
     if robot_description.strip():
+        # RobotModel.from_urdf would take a path here for a file: say where files go
         if "<robot" not in robot_description:
             raise ValueError("robot_description must be the URDF XML text (no <robot> "
                              f"element in {robot_description[:60]!r}); for a file, set "
                              "urdf_path")
         return RobotModel.from_urdf(robot_description, name=cfg.robot or None)
     if urdf_path.strip():
-        path = FilePath(urdf_path).expanduser()
-        if not path.is_file():
-            raise FileNotFoundError(f"urdf_path {urdf_path!r}: no such file")
-        return RobotModel.from_urdf(path, name=cfg.robot or None)
+        return RobotModel.from_urdf(FilePath(urdf_path), name=cfg.robot or None)
     return None
 
 

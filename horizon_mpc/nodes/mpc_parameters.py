@@ -144,7 +144,7 @@ class MpcParameters:
         if any(n in new for n in LIVE_LIMITS):
             st.max_velocity = [float(new.get(n, self._p(n))) for n in LIVE_LIMITS]
         if "stand_when_idle" in new:
-            st.stand_when_idle = self.mpc.scheduler.stand_when_idle = bool(new["stand_when_idle"])
+            self.mpc.set_stand_when_idle(new["stand_when_idle"])
         # read by the node at every tick / command
         self.cmd_timeout = float(new.get("cmd_timeout", self.cmd_timeout))
         self.state_timeout = float(new.get("state_timeout", self.state_timeout))
