@@ -684,10 +684,14 @@ def test_robot_model_comes_from_robot_description_then_urdf_path_then_the_config
         robot_model(cfg, urdf_path="/tmp/no_such.urdf")
 
 
+@pytest.mark.slow  # a renamed joint: the model's functions are compiled once (~15 s)
 def test_the_node_plans_with_the_robot_description_it_is_given(context):
     from horizon_mpc.robots import example_robot_files
 
-    text = example_robot_files("go2").urdf.read_text()
+    # go2 with one joint renamed: only a node that reads this text plans with that name
+    text = example_robot_files("go2").urdf.read_text().replace('"FL_hip_joint"',
+                                                               '"FL_hip_joint_given"')
+    assert "FL_hip_joint_given" in text
     node = MpcNode(parameter_overrides=[Parameter("trigger", value="state"),
                                         Parameter("use_sim_time", value=True),
                                         Parameter("robot_description", value=text)],
@@ -695,6 +699,7 @@ def test_the_node_plans_with_the_robot_description_it_is_given(context):
     try:
         assert node.get_parameter("robot_description").value == text
         assert node.mpc.model.pin_model.nq == 19
+        assert "FL_hip_joint_given" in node.joint_names
         out = drive_in_sim_time(node, 3)
         assert len(out["traj"]) == 3
         assert list(out["traj"][-1].joint_names) == node.joint_names
