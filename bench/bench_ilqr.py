@@ -252,12 +252,16 @@ def find_peer_python(explicit: str | None = None) -> tuple[str | None, str]:
 
 
 def run_peer(python: str, ticks: int, repeats: int, max_iter: int = 100,
-             profile: bool = True, timeout: float = PEER_TIMEOUT) -> dict:
-    """Run ``peer_crocoddyl.py`` with ``python``; its JSON (raises RuntimeError on failure)."""
+             profile: bool = True, timeout: float = PEER_TIMEOUT, pace: float = 0.0) -> dict:
+    """Run ``peer_crocoddyl.py`` with ``python``; its JSON (raises RuntimeError on failure).
+
+    ``pace`` > 0 adds its ``paced_ticks`` (ticks after ``pace`` s of sleep each)."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}  # nothing of ours
     env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
     cmd = [python, str(PEER_SCRIPT), "--ticks", str(ticks), "--repeats", str(repeats),
            "--max-iter", str(max_iter)] + ([] if profile else ["--no-profile"])
+    if pace > 0:
+        cmd += ["--pace", repr(float(pace))]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout,
                           check=False)
     if proc.returncode != 0:
@@ -376,6 +380,13 @@ def summarise_peer(rounds: list[dict]) -> dict:
                   "shift_ms_mean": (sum(tick_ms) - sum(solve_ms)) / n_ticks,
                   "step_length": [x for r in rounds for x in r["ticks"]["step_length"]]},
     }
+    paced = [r["paced_ticks"] for r in rounds if "paced_ticks" in r]
+    if paced:
+        out["paced_ticks"] = {"n": sum(len(p["tick_ms"]) for p in paced),
+                              "pace_s": paced[0]["pace_s"],
+                              "tick_ms": _stats([x for p in paced for x in p["tick_ms"]]),
+                              "tick_cpu_ms": _stats([x for p in paced
+                                                     for x in p["tick_cpu_ms"]])}
     profiles = [r["profile"] for r in rounds if "profile" in r]
     if profiles:
         def mean(path: tuple[str, str]) -> dict[str, float]:

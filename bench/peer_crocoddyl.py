@@ -19,10 +19,13 @@ Measured, single thread:
   (``problem.circularAppend`` of the next node of the following trot cycle, built from the
   end of the solved cycle so that its footholds continue the walk), node 0 becomes the
   previous solution's node 1, and one FDDP iteration runs from the shifted solution;
+* with ``--pace S``, the same warm ticks again with S seconds of sleep before each
+  (``paced_ticks``): a real-time loop at 1/S Hz idles between its ticks, and the tick after
+  an idle period runs slower than one right after the last (cold caches);
 * Crocoddyl's own profiler (``crocoddyl.enable_profiler``) in separate runs (it adds its
   own overhead): calcDiff / backwardPass / tryStep (nonlinear rollout + line search).
 
-Run: ``.venv-peer/bin/python bench/peer_crocoddyl.py [--ticks N] [--repeats R]``.
+Run: ``.venv-peer/bin/python bench/peer_crocoddyl.py [--ticks N] [--repeats R] [--pace S]``.
 """
 
 from __future__ import annotations
@@ -114,11 +117,14 @@ def _future_models(gait, solver, xs0, us0, n: int, step_knots: int, max_iter: in
 
 
 def measure_ticks(gait, solver, xs0, us0, ticks: int, step_knots: int,
-                  max_iter: int, profile: bool = False) -> dict:
+                  max_iter: int, profile: bool = False, pace: float = 0.0) -> dict:
     """Warm MPC ticks: shift the horizon by one node, then one FDDP iteration (ms).
 
     The receding horizon starts from the converged cycle (re-solved here, untimed).
     ``profile``: run under Crocoddyl's profiler and return its per-tick phase times instead.
+    ``pace``: seconds of sleep before each tick, as a real-time loop idles between its
+    ticks (0: back to back). On this machine a tick after 20 ms of idling takes ~1.5x the
+    back-to-back one, whatever the solver (doc/benchmarks.md, Session 16).
     """
     future = _future_models(gait, solver, xs0, us0, ticks, step_knots, max_iter)
     # the horizon's own problem object is modified by circularAppend: work on a copy
@@ -130,6 +136,8 @@ def measure_ticks(gait, solver, xs0, us0, ticks: int, step_knots: int,
         crocoddyl.enable_profiler()
     tick_ms, solve_ms, tick_cpu_ms, steps = [], [], [], []
     for model, data in future:
+        if pace > 0:
+            time.sleep(pace)
         t0, c0 = time.perf_counter(), time.process_time()
         xs = list(mpc.xs[1:]) + [mpc.xs[-1]]
         us = list(mpc.us[1:])
@@ -145,6 +153,7 @@ def measure_ticks(gait, solver, xs0, us0, ticks: int, step_knots: int,
         tick_cpu_ms.append(1e3 * (c2 - c0))
         steps.append(float(mpc.stepLength))
     out = {"tick_ms": tick_ms, "solve_ms": solve_ms, "tick_cpu_ms": tick_cpu_ms,
+           "pace_s": pace,
            "step_length": steps,
            "final_cost": float(mpc.cost)}
     if profile:
@@ -197,6 +206,9 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--step-knots", type=int, default=TROT["stepKnots"],
                     help="knots per step (default 25: 56 nodes)")
     ap.add_argument("--no-profile", action="store_true", help="skip the profiled runs")
+    ap.add_argument("--pace", type=float, default=0.0,
+                    help="also measure warm ticks with this many seconds of sleep before "
+                         "each (a real-time loop's idling; e.g. 0.02 for 50 Hz)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     gait, problem, solver, xs0, us0 = build(args.step_knots)
@@ -214,6 +226,9 @@ def main(argv: list[str] | None = None) -> dict:
         "converging": conv,
         "ticks": ticks,
     }
+    if args.pace > 0:
+        out["paced_ticks"] = measure_ticks(gait, solver, xs0, us0, args.ticks, args.step_knots,
+                                           args.max_iter, pace=args.pace)
     if not args.no_profile:
         out["profile"] = {
             "converging": profile_converging(solver, xs0, us0, args.max_iter),

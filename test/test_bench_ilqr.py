@@ -82,3 +82,16 @@ def test_with_the_peer_both_are_measured_and_the_ratios_computed(tmp_path):
     assert _finite_positive(peer["profile"]["common_ms_per_iteration"]["linearise"])
     ratios = [v for clock in res["ratios"]["8"].values() for v in clock.values()]
     assert len(ratios) == 12 and all(_finite_positive(r) for r in ratios)
+
+
+def test_the_peer_paces_its_warm_ticks_when_asked():
+    """``pace`` adds warm ticks each after that much sleep, pooled by summarise_peer."""
+    python, reason = bench.find_peer_python()
+    if python is None:
+        pytest.skip(reason)
+    out = bench.run_peer(python, ticks=3, repeats=1, max_iter=4, profile=False, pace=0.02)
+    assert out["paced_ticks"]["pace_s"] == 0.02 and len(out["paced_ticks"]["tick_ms"]) == 3
+    assert "paced_ticks" not in bench.run_peer(python, ticks=2, repeats=1, max_iter=4,
+                                               profile=False)
+    pooled = bench.summarise_peer([out, out])["paced_ticks"]
+    assert pooled["n"] == 6 and _finite_positive(pooled["tick_ms"]["median"])
