@@ -46,3 +46,44 @@ def test_closed_loop_arguments_exist_on_the_cli():
     flags = set(re.findall(r'"(--[a-z-]+)"', text))
     cli = (ROOT / "horizon_mpc" / "closed_loop.py").read_text()
     assert flags and all(f'"{flag}"' in cli for flag in flags)
+
+
+class _Recorder:
+    """Stand-in for the launch classes: keeps its arguments."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+def _launch_description(path: Path, monkeypatch) -> list:
+    """The entities of ``path``'s launch description, built with stand-ins of ``launch``
+    and ``launch_ros`` (not installable from PyPI)."""
+    import sys
+    import types
+
+    mods = {"launch": {"LaunchDescription": lambda entities: entities},
+            "launch.actions": {"DeclareLaunchArgument": _Recorder},
+            "launch.substitutions": {"LaunchConfiguration": lambda name: f"$({name})"},
+            "launch_ros.actions": {"Node": _Recorder}}
+    for name, attrs in mods.items():
+        monkeypatch.setitem(sys.modules, name, types.SimpleNamespace(**attrs))
+    monkeypatch.setitem(sys.modules, "launch_ros", types.SimpleNamespace())
+    scope: dict = {}
+    exec(compile(path.read_text(), str(path), "exec"), scope)  # noqa: S102 - our own file
+    return scope["generate_launch_description"]()
+
+
+def test_sim_mpc_gives_both_nodes_the_same_robot_as_declared_parameters(monkeypatch):
+    """Each launch argument reaches both nodes as a parameter the node declares."""
+    entities = _launch_description(ROOT / "launch" / "sim_mpc.launch.py", monkeypatch)
+    declared = {e.args[0] for e in entities if "executable" not in e.kwargs}
+    nodes = {e.kwargs["executable"]: e.kwargs for e in entities if "executable" in e.kwargs}
+    assert set(nodes) == {"sim_node", "mpc_node"}
+    assert {"robot", "config", "urdf_path"} <= declared
+    for exe, kwargs in nodes.items():
+        params = {k: v for d in kwargs["parameters"] for k, v in d.items()}
+        source = (ROOT / "horizon_mpc" / "nodes" / f"{exe}.py").read_text()
+        for name in declared:
+            assert params[name] == f"$({name})", (exe, name)
+            assert re.search(rf'declare\("{name}"', source), f"{exe} declares no {name!r}"
+    assert nodes["mpc_node"]["parameters"][0]["use_sim_time"] is True
