@@ -289,3 +289,29 @@ def test_node_process_exits_cleanly_on_signals(sig):
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_the_sim_loads_the_robot_description_it_is_given_and_removes_its_file(context):
+    from horizon_mpc.robots import example_robot_files
+
+    # go2 with one joint renamed: only a node that loads this text names that joint
+    text = example_robot_files("go2").urdf.read_text().replace('"FL_hip_joint"',
+                                                               '"FL_hip_joint_given"')
+    node = SimNode(parameter_overrides=[Parameter("robot_description", value=text),
+                                        Parameter("lockstep", value=True)], context=context)
+    path = node._description_file
+    try:
+        assert path is not None and os.path.isfile(path)
+        assert "FL_hip_joint_given" in node.sim.joint_names and node.sim.n_joints == 12
+    finally:
+        node.destroy_node()
+    assert not os.path.exists(path)
+
+
+def test_a_path_given_as_robot_description_is_refused_pointing_to_urdf_path(context):
+    from horizon_mpc.robots import example_robot_files
+
+    path = str(example_robot_files("go2").urdf)
+    with pytest.raises(ValueError, match="urdf_path"):
+        SimNode(parameter_overrides=[Parameter("robot_description", value=path)],
+                context=context)

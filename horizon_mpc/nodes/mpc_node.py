@@ -45,6 +45,7 @@ from horizon_mpc.nodes.mpc_outputs import (
     period_ns,
 )
 from horizon_mpc.nodes.mpc_parameters import LIVE_LIMITS, MpcParameters
+from horizon_mpc.nodes.robot_description import check_urdf_text
 from horizon_mpc.nodes.spin import spin_until_signal
 
 __all__ = ["MpcNode", "main", "robot_model"]
@@ -402,10 +403,7 @@ def robot_model(cfg: RobotConfig, urdf_path: str = "",
     """
     if robot_description.strip():
         # RobotModel.from_urdf would take a path here for a file: say where files go
-        if "<robot" not in robot_description:
-            raise ValueError("robot_description must be the URDF XML text (no <robot> "
-                             f"element in {robot_description[:60]!r}); for a file, set "
-                             "urdf_path")
+        check_urdf_text(robot_description)
         return RobotModel.from_urdf(robot_description, name=cfg.robot or None)
     if urdf_path.strip():
         return RobotModel.from_urdf(FilePath(urdf_path), name=cfg.robot or None)

@@ -18,6 +18,7 @@ drive the simulator and a controller deterministically in one process and one ex
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Sequence
 
@@ -42,6 +43,7 @@ from horizon_mpc.nodes.conversions import (
     time_to_ns,
     vector3_from_msg,
 )
+from horizon_mpc.nodes.robot_description import description_file
 from horizon_mpc.nodes.spin import spin_until_signal
 from horizon_mpc.sim.simulator import Simulator
 
@@ -73,17 +75,24 @@ class SimNode(Node):
         robot = par("config") or par("robot")
         cfg = load_robot_config(robot)
         physics_rate = par("physics_rate")
-        self.sim = Simulator(
-            cfg,
-            dt=1.0 / physics_rate,
-            urdf_path=par("urdf_path") or None,
-            kp=par("kp"),
-            kd=par("kd"),
-            friction=par("friction"),
-            base_pose=(par("initial_x"), par("initial_y"), par("initial_yaw")),
-            trajectory_timeout=par("trajectory_timeout"),
-            max_stamp_offset=par("max_stamp_offset"),
-        )
+        # robot_description (URDF text): pybullet and Pinocchio load files, so the text goes
+        # to a temporary file for the node's lifetime
+        self._description_file = description_file(par("robot_description"))
+        try:
+            self.sim = Simulator(
+                cfg,
+                dt=1.0 / physics_rate,
+                urdf_path=self._description_file or par("urdf_path") or None,
+                kp=par("kp"),
+                kd=par("kd"),
+                friction=par("friction"),
+                base_pose=(par("initial_x"), par("initial_y"), par("initial_yaw")),
+                trajectory_timeout=par("trajectory_timeout"),
+                max_stamp_offset=par("max_stamp_offset"),
+            )
+        except BaseException:
+            self._remove_description_file()
+            raise
         self.base_link = cfg.base_link if cfg.base_link in self.sim.robot.link_index \
             else self.sim.robot.root_link
         self._dt_ns = round(NS_PER_S / physics_rate)
@@ -147,6 +156,8 @@ class SimNode(Node):
         declare("robot", "go2", "robot config name (config/<robot>.yaml)")
         declare("config", "", "path of a robot config YAML (overrides 'robot')")
         declare("urdf_path", "", "URDF to simulate instead of the config's")
+        declare("robot_description", "", "URDF XML text to simulate, as robot_state_publisher's "
+                "parameter (overrides urdf_path)")
         declare("physics_rate", 1000.0, "physics steps per sim second (Hz)", _range(50, 20000))
         declare("state_rate", 500.0, "joint_states/odom/clock publish rate (Hz, sim time)",
                 _range(1, 20000))
@@ -307,9 +318,19 @@ class SimNode(Node):
         return response
 
     def destroy_node(self) -> None:
-        """Destroy the node and close the physics client."""
+        """Destroy the node, close the physics client and remove the robot_description's
+        temporary file."""
         self.sim.close()
+        self._remove_description_file()
         super().destroy_node()
+
+    def _remove_description_file(self) -> None:
+        if self._description_file:
+            try:
+                os.remove(self._description_file)
+            except OSError:
+                pass
+            self._description_file = None
 
 
 def main(args: Sequence[str] | None = None) -> int:
