@@ -127,3 +127,39 @@ def test_weights_node_sets_and_bounds_change_without_rebuild():
     assert np.max(np.abs(solver.solution["u"])) == pytest.approx(20.0, abs=1e-6)
     assert solver.solution["x"][0, 10] == pytest.approx(1.0, abs=1e-8)
     assert (solver._linearize, solver._qp_solver()) == functions
+
+
+def _double_integrator_with_nan_guess():
+    import casadi as cs
+
+    from horizon_mpc.problem import Problem
+
+    prb = Problem(5)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.vertcat(x[1], u))
+    prb.set_dt(0.1)
+    x.set_bounds([0.0, 0.0], [0.0, 0.0], nodes=0)
+    prb.create_cost("effort", u - 3)
+    prb.create_final_constraint("goal", x - np.array([0.5, 0.0]))
+    u.set_initial_guess(np.nan)
+    return prb
+
+
+def test_a_nan_guess_is_a_failure_not_a_converged_solution():
+    """NaN says nothing about feasibility: no 'converged' with a NaN solution."""
+    solver = make_solver("gnsqp", _double_integrator_with_nan_guess())
+    assert solver.solve() is False
+    assert "not finite" in solver.stats.status and solver.stats.iterations == 0
+    assert np.isnan(solver.stats.constraint_violation)
+
+
+def test_the_violation_of_a_nan_point_is_nan():
+    solver = make_solver("gnsqp", _double_integrator_with_nan_guess())
+    tr = solver.transcription
+    w = np.zeros(tr.nw)
+    w[3] = np.nan
+    lbx, ubx = tr.bounds_w()
+    lbg, ubg = tr.bounds_g()
+    assert np.isnan(tr.violation(w, np.zeros(tr.ng), lbx, ubx, lbg, ubg))
+    assert tr.violation(np.zeros(tr.nw), np.zeros(tr.ng), lbx, ubx, lbg, ubg) >= 0.0

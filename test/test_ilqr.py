@@ -132,6 +132,32 @@ def test_free_single_variable_is_refused_not_ignored():
         make_solver("ilqr", prb, OPTS)
 
 
+@pytest.mark.parametrize("codegen", [False, True], ids=["vm", "compiled"])
+@pytest.mark.parametrize("where", ["dynamics", "cost"])
+def test_a_fixed_single_variable_is_the_same_at_every_node(codegen, where):
+    """A single variable fixed by equal bounds is one value for all nodes (the stage
+    functions take it once, not once per node): ILQR finds IPOPT's optimum."""
+    def build():
+        prb = Problem(10)
+        x = prb.create_state_variable("x", 1)
+        u = prb.create_input_variable("u", 1)
+        k = prb.create_single_variable("k", 1)
+        k.set_bounds(2.0, 2.0)
+        prb.set_dynamics(k * u if where == "dynamics" else 2 * u)
+        prb.set_dt(0.1)
+        x.set_bounds(0.0, 0.0, nodes=0)
+        prb.create_final_constraint("goal", x - 1.0)
+        prb.create_cost("effort", u if where == "dynamics" else u * k / 2)
+        return prb
+
+    ilqr = make_solver("ilqr", build(), {**OPTS, "codegen": codegen})
+    ipopt = make_solver("ipopt", build())
+    assert ilqr.solve() and ipopt.solve()
+    assert ilqr.stats.cost == pytest.approx(ipopt.stats.cost, rel=1e-8)  # 2.5
+    np.testing.assert_allclose(ilqr.solution["u"], ipopt.solution["u"], atol=1e-8)
+    assert ilqr.solution["x"][0, -1] == pytest.approx(1.0, abs=1e-9)
+
+
 def test_general_cost_is_refused():
     prb = Problem(10)
     x = prb.create_state_variable("x", 1)

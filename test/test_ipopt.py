@@ -211,3 +211,19 @@ def test_active_constraint_rows_give_a_smaller_nlp_with_the_same_optimum():
     prb.get_term("goal_q").set_nodes(40)
     with pytest.raises(ValueError, match=r"'goal_q' is active on nodes \[40\] that have no rows"):
         trimmed.solve()
+
+
+def test_a_nan_parameter_reports_nan_cost_and_violation_not_zero():
+    prb = Problem(5)
+    x = prb.create_state_variable("x", 1)
+    u = prb.create_input_variable("u", 1)
+    k = prb.create_parameter("k", 1)
+    k.assign(np.nan)
+    prb.set_dynamics(u)
+    prb.set_dt(0.1)
+    x.set_bounds(0.0, 0.0, nodes=0)
+    prb.create_cost("effort", k * u)
+    solver = make_solver("ipopt", prb)
+    assert solver.solve() is False
+    assert solver.stats.status == "Invalid_Number_Detected"
+    assert np.isnan(solver.stats.cost) and np.isnan(solver.stats.constraint_violation)

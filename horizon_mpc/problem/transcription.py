@@ -28,6 +28,7 @@ terms get shifted column slices); there is no Python loop over nodes in the grap
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import casadi as cs
@@ -281,13 +282,14 @@ class Transcription:
 
     def violation(self, w: np.ndarray, g: np.ndarray, lbx: np.ndarray, ubx: np.ndarray,
                   lbg: np.ndarray, ubg: np.ndarray) -> float:
-        """Max violation (inf-norm) of the dynamics, constraints and variable bounds."""
+        """Max violation (inf-norm) of the dynamics, constraints and variable bounds; NaN
+        when a value is NaN (a NaN is no evidence of feasibility)."""
         w, g = np.ravel(w), np.ravel(g)
         viol = [0.0]
         for val, lo, hi in ((w, lbx, ubx), (g, lbg, ubg)):
             if val.size:
                 viol.append(float(np.max(np.maximum(lo - val, val - hi))))
-        return max(viol)
+        return math.nan if any(map(math.isnan, viol)) else max(viol)
 
     # ------------------------------------------------------------------ receding horizon
     @staticmethod

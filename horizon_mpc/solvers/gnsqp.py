@@ -48,6 +48,7 @@ Options (``make_solver('gnsqp', prb, opts)``):
 from __future__ import annotations
 
 import logging
+import math
 import time
 from typing import Any
 
@@ -201,6 +202,10 @@ class GnSqpSolver(NlpSolver):
             viol = tr.violation(w, g, lbx, ubx, lbg, ubg)
             history.append({"iteration": it, "cost": f, "violation": viol,
                             "stationarity": stat, "step": step, "alpha": alpha, "mu": mu})
+            if not (math.isfinite(f) and math.isfinite(viol) and np.isfinite(grad).all()):
+                status = ("not finite at the initial guess (NaN/inf in the guess or the "
+                          "parameters)" if it == 0 else "not finite after a step")
+                break
             if viol <= o["tol_constr"] and (stat <= o["tol"] or step <= o["tol_step"]):
                 status, success = "converged", True
                 break

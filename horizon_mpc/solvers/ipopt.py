@@ -28,6 +28,7 @@ Changing an option with :meth:`set_option` rebuilds the instances, never the NLP
 from __future__ import annotations
 
 import logging
+import math
 import time
 from typing import Any
 
@@ -126,6 +127,9 @@ class IpoptSolver(NlpSolver):
         s.time = elapsed
         s.cost = float(res["f"])
         s.constraint_violation = tr.violation(w, g, lbx, ubx, lbg, ubg)
+        if s.status == "Invalid_Number_Detected":
+            # IPOPT stopped on a NaN/inf of the functions: its f (0) and g say nothing
+            s.cost = s.constraint_violation = math.nan
         s.history = []
         s.extra = {"warm": warm}
         log.debug("ipopt %s: %s in %d iterations, %.4f s, cost %.6g, violation %.2e",
