@@ -329,3 +329,22 @@ def test_a_left_out_equality_made_an_inequality_gets_its_terms_back():
     ref = make_solver("ilqr", ref_prb, {**OPTS, "equality": "lagrangian"})
     assert ref.solve()
     assert solver.stats.cost == pytest.approx(ref.stats.cost, rel=1e-6)
+
+
+def test_a_nan_parameter_is_named_as_such_not_as_a_bad_guess():
+    prb = Problem(5)
+    x = prb.create_state_variable("x", 1)
+    u = prb.create_input_variable("u", 1)
+    k = prb.create_parameter("k", 1)
+    prb.set_dynamics(u)
+    prb.set_dt(0.1)
+    x.set_bounds(0.0, 0.0, nodes=0)
+    prb.create_cost("effort", k * u)
+    solver = make_solver("ilqr", prb, OPTS)
+    k.assign(np.nan)
+    assert solver.solve() is False and solver.stats.status == "parameters not finite"
+    k.assign(1.0)
+    u.set_initial_guess(np.nan)
+    assert solver.solve() is False and solver.stats.status == "initial guess not finite"
+    u.set_initial_guess(0.0)
+    assert solver.solve() is True

@@ -141,6 +141,20 @@ def test_node_selections_accept_masks_and_integer_arrays():
         select_nodes(np.array([1, 6]), 6, "cost 'c'")
 
 
+def test_a_list_of_bools_is_a_mask_and_bools_or_fractions_are_not_nodes():
+    """Read as ints, [False, False, True] would select nodes 0 and 1 and True node 1."""
+    from horizon_mpc.problem.nodes import select_nodes
+
+    np.testing.assert_array_equal(select_nodes([False, True, False, True], 4), [1, 3])
+    np.testing.assert_array_equal(select_nodes([2.0, 0], 4), [0, 2])  # whole floats are nodes
+    with pytest.raises(IndexError, match="boolean node mask"):
+        select_nodes([True, False], 4, "cost 'c'")
+    for bad, text in ((True, "a bool is not a node"), ([2.7], "2.7 is not a node number"),
+                      ([1, True], "mixed with node numbers"), (["a"], "'a' is not a node")):
+        with pytest.raises(TypeError, match=text):
+            select_nodes(bad, 4, "cost 'c'")
+
+
 def test_a_term_switched_by_a_mask_is_active_exactly_there(prb):
     x = prb.get_variable("x")
     cost = prb.create_cost("mask_cost", x)
@@ -172,3 +186,85 @@ def test_stacked_bounds_and_weights_follow_each_terms_nodes_rows_and_values(prb)
     expected[2, :prb.n_nodes] = 7.0
     np.testing.assert_array_equal(w, expected)
     assert stacked_weights([]).shape == (0, 0) and stacked_bounds([])[0].shape == (0, 0)
+
+
+def _goal_problem(dt: float = 0.1) -> Problem:
+    prb = Problem(10)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.vertcat(x[1], u))
+    prb.set_dt(dt)
+    x.set_bounds([0.0, 0.0], [0.0, 0.0], nodes=0)
+    prb.create_final_constraint("goal", x - np.array([1.0, 0.0]))
+    prb.create_cost("effort", u)
+    return prb
+
+
+@pytest.mark.parametrize("solver_name", ["ipopt", "gnsqp", "ilqr"])
+@pytest.mark.parametrize("change", ["dt", "transcription", "dynamics"])
+def test_a_structural_change_after_the_build_is_refused_not_ignored(solver_name, change):
+    """A solver built before set_dt/transcribe/set_dynamics would solve the old problem:
+    it refuses; a solver built after the change solves the new one."""
+    prb = _goal_problem()
+    opts = {"codegen": False} if solver_name == "ilqr" else {}
+    solver = make_solver(solver_name, prb, opts)
+    assert solver.solve()
+    if change == "dt":
+        prb.set_dt(0.2)
+    elif change == "transcription":
+        prb.transcribe("multiple_shooting", integrator="euler")
+    else:
+        prb.set_dynamics(cs.vertcat(prb.states[0][1], 2 * prb.inputs[0]))
+    with pytest.raises(RuntimeError, match="build a new solver"):
+        solver.solve()
+    fresh = make_solver(solver_name, prb, opts)
+    assert fresh.solve()
+    if change == "dt":  # half the control effort spread over twice the time
+        reference = make_solver(solver_name, _goal_problem(0.2), opts)
+        assert reference.solve()
+        assert fresh.stats.cost == pytest.approx(reference.stats.cost, rel=1e-6)
+
+
+def test_the_split_ilqr_iteration_refuses_a_changed_problem_too():
+    prb = _goal_problem()
+    solver = make_solver("ilqr", prb, {"codegen": False})
+    assert solver.solve()
+    prb.set_dt(0.05)
+    with pytest.raises(RuntimeError, match="build a new solver"):
+        solver.prepare()
+
+
+def test_a_manifold_declared_after_the_dynamics_is_caught_at_the_build():
+    prb = Problem(5)
+    q = prb.create_state_variable("q", 2)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.vertcat(u, 2 * u))
+    a, d, b = cs.SX.sym("a", 2), cs.SX.sym("d", 1), cs.SX.sym("b", 2)
+    rot = cs.vertcat(a[0] * cs.cos(d) - a[1] * cs.sin(d), a[0] * cs.sin(d) + a[1] * cs.cos(d))
+    q.set_manifold(cs.Function("integrate", [a, d], [rot]),
+                   cs.Function("difference", [a, b], [cs.atan2(a[0] * b[1] - a[1] * b[0],
+                                                               a[0] * b[0] + a[1] * b[1])]), 1)
+    prb.set_dt(0.1)
+    prb.create_cost("effort", u - 1)
+    with pytest.raises(ValueError, match="set the dynamics again"):
+        make_solver("ipopt", prb)
+
+
+def test_nan_bounds_and_crossed_one_sided_bounds_are_refused(prb):
+    u = prb.get_variable("u")
+    with pytest.raises(ValueError, match="NaN bound"):
+        u.set_bounds(np.nan, 1.0)
+    u.set_bounds(-1.0, 1.0)
+    with pytest.raises(ValueError, match="lower bound above upper bound"):
+        u.set_lower_bounds(2.0)
+    with pytest.raises(ValueError, match="lower bound above upper bound"):
+        u.set_upper_bounds(-2.0, nodes=0)
+    with pytest.raises(ValueError, match="NaN bound"):
+        u.set_upper_bounds(np.nan)
+    np.testing.assert_array_equal(u.lower_bounds, -1.0)  # nothing written by a refusal
+    np.testing.assert_array_equal(u.upper_bounds, 1.0)
+    u.set_lower_bounds(0.5, nodes=1)
+    assert u.lower_bounds[0, 1] == 0.5
+    con = prb.create_constraint("c", prb.get_variable("x")[0])
+    with pytest.raises(ValueError, match="NaN bound"):
+        con.set_bounds(np.nan, 0.0)

@@ -2,8 +2,9 @@
 
 Nodes are numbered 0..N (``N = n_nodes``, the number of intervals). States live on nodes
 0..N, inputs on 0..N-1. Every ``nodes=`` argument of the Problem API accepts an int, a list
-or integer array, a ``range``, a ``slice``, a boolean mask with one entry per node the
-object lives on, or None (= every node the object lives on).
+or integer array, a ``range``, a ``slice``, a boolean mask (array or list) with one entry
+per node the object lives on, or None (= every node the object lives on). A bool alone or a
+non-integer number is refused.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 
 NodeSelection = int | Iterable[int] | slice | range | None
 
-__all__ = ["NodeSelection", "broadcast_values", "select_nodes"]
+__all__ = ["NodeSelection", "broadcast_values", "check_bounds", "select_nodes"]
 
 
 def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "") -> np.ndarray:
@@ -28,6 +29,12 @@ def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "") -> np.ndarr
         return np.arange(n_valid)
     if isinstance(nodes, slice):
         return np.arange(n_valid)[nodes]
+    if isinstance(nodes, (bool, np.bool_)):
+        raise TypeError(f"nodes of {what}: a bool is not a node (give a mask with one entry "
+                        f"per node 0..{n_valid - 1}, or None for all)")
+    if isinstance(nodes, (list, tuple)) and nodes and all(
+            isinstance(n, (bool, np.bool_)) for n in nodes):
+        nodes = np.array(nodes, dtype=bool)  # a mask written as a list
     if isinstance(nodes, (int, np.integer)):
         idx = np.array([int(nodes)])
     elif isinstance(nodes, np.ndarray) and nodes.dtype == bool:
@@ -39,10 +46,11 @@ def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "") -> np.ndarr
         idx = nodes.astype(int)  # the fast path of per-tick schedules (np.flatnonzero)
     else:
         try:
-            idx = np.array([int(n) for n in nodes], dtype=int)
+            items = list(nodes)
         except TypeError as exc:
             raise TypeError(f"nodes of {what}: expected int, list, range, slice or None, "
                             f"got {type(nodes).__name__}") from exc
+        idx = np.array([_node_index(n, what) for n in items], dtype=int)
     if idx.size and (idx.min() < 0 or idx.max() >= n_valid):
         bad = idx[(idx < 0) | (idx >= n_valid)]
         raise IndexError(f"nodes {bad.tolist()} out of range for {what}: valid nodes are "
@@ -50,6 +58,17 @@ def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "") -> np.ndarr
     if idx.size > 1 and np.any(idx[1:] <= idx[:-1]):
         return np.unique(idx)
     return idx
+
+
+def _node_index(n: object, what: str) -> int:
+    """One node of a list: an int, or a float holding one (2.0); 2.7 or True is refused."""
+    if isinstance(n, (bool, np.bool_)):
+        raise TypeError(f"nodes of {what}: {n!r} mixed with node numbers")
+    if isinstance(n, (float, np.floating)) and float(n).is_integer():
+        return int(n)
+    if not isinstance(n, (int, np.integer)):
+        raise TypeError(f"nodes of {what}: {n!r} is not a node number")
+    return int(n)
 
 
 def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:
@@ -69,3 +88,12 @@ def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:
         return arr.copy()
     raise ValueError(f"{what}: value of shape {arr.shape} does not fit dimension {dim} on "
                      f"{n_sel} node(s); give a scalar, ({dim},) or ({dim}, {n_sel})")
+
+
+def check_bounds(lo: np.ndarray, hi: np.ndarray, what: str) -> None:
+    """Raise ValueError when a bound is NaN (no bound is -inf/inf; a NaN bound would be
+    ignored by some solvers and enforced by others) or a lower bound is above its upper."""
+    if np.isnan(lo).any() or np.isnan(hi).any():
+        raise ValueError(f"{what}: NaN bound (use -inf/inf for no bound)")
+    if np.any(lo > hi):
+        raise ValueError(f"{what}: lower bound above upper bound")

@@ -71,6 +71,7 @@ class Problem:
         self.collocation_degree = 3
         self._finalized = False
         self._cache: dict[str, object] = {}
+        self._revision = 0  # see structure_revision
 
     # ------------------------------------------------------------------ variables
     def _check_new(self, name: str, dim: int, what: str) -> None:
@@ -200,6 +201,7 @@ class Problem:
                              f"(tangent of the stacked states), got {xdot.shape}")
         self._check_symbols(xdot, "dynamics", allow_offsets=False)
         self._xdot = xdot
+        self._revision += 1
 
     @property
     def dynamics(self) -> cs.SX | None:
@@ -212,6 +214,7 @@ class Problem:
             if not dt > 0:
                 raise ValueError(f"dt must be > 0, got {dt}")
             self._dt = float(dt)
+            self._revision += 1
             return
         dt = cs.SX(dt) if not isinstance(dt, cs.SX) else dt
         if dt.shape != (1, 1):
@@ -220,6 +223,7 @@ class Problem:
             raise ValueError("dt may depend on single variables and parameters only")
         self._check_symbols(dt, "dt", allow_offsets=False)
         self._dt = dt
+        self._revision += 1
 
     @property
     def dt(self) -> float | cs.SX:
@@ -244,6 +248,15 @@ class Problem:
         self.transcription = method
         self.collocation_degree = int(degree)
         self._cache.clear()
+        self._revision += 1
+
+    @property
+    def structure_revision(self) -> int:
+        """A count that grows with every change a solver built earlier cannot follow: the
+        dynamics, dt, the transcription or integrator, a state's manifold. Solvers refuse
+        to solve once it moved (build a new one); bounds, guesses, parameters, weights and
+        node sets are read at every solve and do not count."""
+        return self._revision + sum(v.manifold_revision for v in self.states)
 
     # ------------------------------------------------------------------ manifold helpers
     def _state_blocks(self):
@@ -308,6 +321,10 @@ class Problem:
     def _require_dynamics(self) -> None:
         if self._xdot is None:
             raise RuntimeError("the dynamics are not set: call set_dynamics()")
+        if self._xdot.shape != (self.ndx, 1):  # a manifold declared after set_dynamics
+            raise ValueError(f"dynamics: {self._xdot.shape[0]} rows but the states' tangent "
+                             f"space has {self.ndx} (a manifold set after set_dynamics()?): "
+                             "set the dynamics again")
 
     # ------------------------------------------------------------------ terms
     def _known_symbols(self, allow_offsets: bool) -> dict[str, str]:

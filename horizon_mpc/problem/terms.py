@@ -16,7 +16,7 @@ import itertools
 import casadi as cs
 import numpy as np
 
-from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, select_nodes
+from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, check_bounds, select_nodes
 
 __all__ = ["Constraint", "Cost", "GeneralCost", "Term", "revisions", "stacked_active",
            "stacked_bounds", "stacked_weights"]
@@ -122,8 +122,7 @@ class Constraint(Term):
                else select_nodes(nodes, self.n_nodes + 1, f"constraint {self.name!r}"))
         lo = broadcast_values(lb, self.dim, idx.size, f"lower bound of {self.name!r}")
         hi = broadcast_values(ub, self.dim, idx.size, f"upper bound of {self.name!r}")
-        if np.any(lo > hi):
-            raise ValueError(f"constraint {self.name!r}: lower bound above upper bound")
+        check_bounds(lo, hi, f"constraint {self.name!r}")
         self._lb[:, idx], self._ub[:, idx] = lo, hi
         self.revision = self.bounds_revision = next(_REVISIONS)
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import casadi as cs
 import numpy as np
 
-from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, select_nodes
+from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, check_bounds, select_nodes
 
 __all__ = [
     "InputVariable",
@@ -91,22 +91,32 @@ class Variable(cs.SX):
         target[:, cols] = arr
 
     def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:
-        """Set lower and upper bounds on ``nodes`` (scalar, (dim,) or (dim, n_sel))."""
+        """Set lower and upper bounds on ``nodes`` (scalar, (dim,) or (dim, n_sel)).
+
+        Raises:
+            ValueError: a bound is NaN (no bound is -inf/inf), or a lower bound is above
+                its upper bound, or a shape does not fit.
+        """
         cols, n = self._columns(nodes)
         lo, hi = self._values(lb, n, "lower bound"), self._values(ub, n, "upper bound")
-        if np.any(lo > hi):
-            raise ValueError(f"bounds of {self.name!r}: lower bound above upper bound")
+        check_bounds(lo, hi, f"bounds of {self.name!r}")
         self._lb[:, cols], self._ub[:, cols] = lo, hi
 
     def set_lower_bounds(self, lb, nodes: NodeSelection = None) -> None:
-        """Set the lower bounds only."""
+        """Set the lower bounds only (checked as :meth:`set_bounds` against the upper
+        bounds in place)."""
         cols, n = self._columns(nodes)
-        self._write(self._lb, cols, n, lb, "lower bound")
+        lo = self._values(lb, n, "lower bound")
+        check_bounds(lo, self._ub[:, cols], f"bounds of {self.name!r}")
+        self._lb[:, cols] = lo
 
     def set_upper_bounds(self, ub, nodes: NodeSelection = None) -> None:
-        """Set the upper bounds only."""
+        """Set the upper bounds only (checked as :meth:`set_bounds` against the lower
+        bounds in place)."""
         cols, n = self._columns(nodes)
-        self._write(self._ub, cols, n, ub, "upper bound")
+        hi = self._values(ub, n, "upper bound")
+        check_bounds(self._lb[:, cols], hi, f"bounds of {self.name!r}")
+        self._ub[:, cols] = hi
 
     def set_initial_guess(self, value, nodes: NodeSelection = None) -> None:
         """Set the initial guess (warm start) on ``nodes``."""
@@ -169,6 +179,7 @@ class StateVariable(_NodeVariable):
     def __init__(self, name: str, dim: int, n_nodes: int):
         super().__init__(name, dim, n_nodes + 1)
         self.manifold: Manifold | None = None
+        self.manifold_revision = 0  # counts set_manifold calls (Problem.structure_revision)
 
     @property
     def tangent_dim(self) -> int:
@@ -182,6 +193,7 @@ class StateVariable(_NodeVariable):
             raise ValueError(f"manifold of {self.name!r}: integrate must map "
                              f"({self.dim}, {tangent_dim}) -> {self.dim}")
         self.manifold = Manifold(integrate, difference, int(tangent_dim))
+        self.manifold_revision += 1
 
 
 class InputVariable(_NodeVariable):

@@ -65,8 +65,18 @@ class Solver:
         self.prb = prb
         self.opts = self._merge_options(opts or {})
         prb.finalize()
+        self._structure_revision = prb.structure_revision
         self.solution: dict[str, np.ndarray] = {}
         self.stats = SolverStats()
+
+    def check_problem_unchanged(self) -> None:
+        """Raise RuntimeError when the problem's structure (dynamics, dt, transcription, a
+        manifold: ``Problem.structure_revision``) changed after this solver was built: it
+        would go on solving the old one."""
+        if self.prb.structure_revision != self._structure_revision:
+            raise RuntimeError(f"{self.name}: the problem's dynamics, dt, transcription or a "
+                               "state manifold changed after this solver was built, and it "
+                               "would solve the old problem: build a new solver (make_solver)")
 
     def _merge_options(self, opts: dict[str, Any]) -> dict[str, Any]:
         known = {**self.COMMON, **self.DEFAULTS}
@@ -86,7 +96,13 @@ class Solver:
         self.opts[key] = value
 
     def solve(self) -> bool:
-        """Solve from the current initial guesses; returns success."""
+        """Solve from the current initial guesses; returns success.
+
+        Raises:
+            RuntimeError: the problem's structure changed since the solver was built
+                (see :meth:`check_problem_unchanged`).
+        """
+        self.check_problem_unchanged()
         ok = self._solve()
         if self.solution and self.opts["warm_start"]:
             self._write_back()

@@ -502,6 +502,14 @@ class IlqrSolver(Solver):
         self._gather()
         return self._evaluate(self.X, self.U)
 
+    def _not_finite_status(self) -> str:
+        """Why the evaluation at the warm start is not finite, as far as the data say."""
+        if not (np.isfinite(self.X).all() and np.isfinite(self.U).all()):
+            return "initial guess not finite"
+        if not (np.isfinite(self.P).all() and np.isfinite(self.S).all()):
+            return "parameters not finite"
+        return "not finite at the initial guess (a function of the problem gave NaN/inf)"
+
     def _time(self, phase: str, seconds: float) -> None:
         self.timings[phase] = self.timings.get(phase, 0.0) + seconds
 
@@ -525,7 +533,7 @@ class IlqrSolver(Solver):
         t_start = time.perf_counter()
         ev = self._begin_call()
         if ev is None:
-            self.stats.success, self.stats.status = False, "initial guess not finite"
+            self.stats.success, self.stats.status = False, self._not_finite_status()
             self._publish(ev)
             return False
         rti = bool(o["rti"])
@@ -610,10 +618,11 @@ class IlqrSolver(Solver):
         prepared (warm start or linearisation not finite, regularisation limit);
         ``stats.status`` says why.
         """
+        self.check_problem_unchanged()
         t_start = time.perf_counter()
         ev = self._begin_call()
         if ev is None:
-            self.stats.status = "prepare: warm start not finite"
+            self.stats.status = f"prepare: {self._not_finite_status()}"
             return False
         info = self._new_info()
         lq = self._lq_step(ev, info)
