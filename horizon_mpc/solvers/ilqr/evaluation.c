@@ -39,7 +39,9 @@ typedef struct {
 
 /*
  * What an evaluation reads besides the trajectory. Row-major arrays:
- *  S (ns) the fixed single variables; P (N+1, npar) the parameters node by node;
+ *  S (N, ns) the fixed single variables, repeated per stage node (the mapped functions
+ *  take one column per node; the terminal one reads the first); P (N+1, npar) the
+ *  parameters node by node;
  *  x_init (nx) node 0's fixed state or NULL (free); W (N, nr), WN (nrN) residual weights;
  *  b, eq (N, ncon) the projected rows' targets and mask (eq: 0/1), bN, eqN (ncNcon).
  */

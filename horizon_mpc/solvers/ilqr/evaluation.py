@@ -162,7 +162,9 @@ class CompiledEvaluation:
         self._x_init = np.zeros(s["nx"])
         self._x_init_set: np.ndarray | None = None
         # the problem's data: set_problem copies into these, the C code points at them
-        self._S, self._P = np.zeros(s["ns"]), np.zeros((s["N"] + 1, s["npar"]))
+        # the singles once per stage node (the mapped functions take one column per node;
+        # the terminal one reads the first)
+        self._S, self._P = np.zeros((s["N"], s["ns"])), np.zeros((s["N"] + 1, s["npar"]))
         self._W, self._WN = np.zeros((s["N"], s["nr"])), np.zeros(s["nrN"])
         self._weights_set = False  # set_problem copies the weights when they change only
         self._b, self._eq = np.zeros((s["N"], s["ncon"])), np.zeros((s["N"], s["ncon"]), bool)
@@ -231,7 +233,8 @@ class CompiledEvaluation:
         last ones given; they must have been given once). Copied into arrays the C code
         holds pointers to (set once); the augmented Lagrangians' bounds, multipliers and
         penalties are read in place."""
-        arrays = [("S", self._S, np.reshape(S, -1)), ("P", self._P, P.T), ("b", self._b, b),
+        arrays = [("S", self._S, np.broadcast_to(np.reshape(S, -1), self._S.shape)),
+                  ("P", self._P, P.T), ("b", self._b, b),
                   ("eq", self._eq, eq), ("bN", self._bN, bN), ("eqN", self._eqN, eqN)]
         if weights is not None:
             arrays += [("W", self._W, weights[0]), ("WN", self._WN, weights[1])]

@@ -314,7 +314,7 @@ class IlqrSolver(Solver):
                     "rN": ce.rN.reshape(1, m.nrN).copy(), "cN": ce.cN.reshape(1, m.ncN).copy(),
                     "d0": ce.d0.copy(), "eq_l1": eq_l1, "cost": cost, "al": al,
                     "gap_l1": gap_l1, "viol": max(gap_max, eq_max, al_viol)}
-        gap, r, c = self._values(X[:N].T, U.T, self.S, self.P[:, :N], X[1:].T)
+        gap, r, c = self._values(X[:N].T, U.T, self._singles_per_node(), self.P[:, :N], X[1:].T)
         rN, cN = self._values_term(X[N], self.S, self.P[:, N])
         gap, r, c = gap.T.copy(), r.T.copy(), c.T.copy()  # (N, ndx), (N, nr), (N, nc)
         rN, cN = rN.reshape(1, m.nrN).copy(), cN.reshape(1, m.ncN).copy()
@@ -349,7 +349,8 @@ class IlqrSolver(Solver):
             return self._q_views
         wc, tc = self._al.weights_targets(ev["c"])
         wcN, tcN = self._alN.weights_targets(ev["cN"])
-        out = self._quadratise_fn(X[:N].T, U.T, self.S, self.P[:, :N], self.Wr.T, wc.T, tc.T)
+        out = self._quadratise_fn(X[:N].T, U.T, self._singles_per_node(), self.P[:, :N], self.Wr.T,
+                                  wc.T, tc.T)
         out_term = self._quadratise_term(X[N], self.S, self.P[:, N], self.WrN.T, wcN.T,
                                          tcN.T)
         # one finiteness test on the outputs (NaN and inf propagate through sums)
@@ -501,6 +502,11 @@ class IlqrSolver(Solver):
         self._prepared = None
         self._gather()
         return self._evaluate(self.X, self.U)
+
+    def _singles_per_node(self) -> np.ndarray:
+        """The single variables once per stage node, (ns, N): the mapped stage functions
+        take one column per node (a view, no copy)."""
+        return np.broadcast_to(self.S, (self.S.shape[0], self.model.n_nodes))
 
     def _not_finite_status(self) -> str:
         """Why the evaluation at the warm start is not finite, as far as the data say."""

@@ -130,13 +130,6 @@ def _input_reach(cons, x, u, s, p, x_next, terminal: bool = False) -> np.ndarray
     return np.concatenate(rows) if rows else np.zeros(0, bool)
 
 
-def _map_over_nodes(fn: cs.Function, n: int) -> cs.Function:
-    """``fn`` evaluated at ``n`` nodes in one call: every input takes one column per node,
-    but the single variables ``s``, which are the same at every node, take one column."""
-    shared = [i for i in range(fn.n_in()) if fn.name_in(i) == "s"]
-    return fn.map(f"map{n}_{fn.name()}", "serial", n, shared, [])
-
-
 def _compile(fn: cs.Function, enabled: bool) -> cs.Function:
     if not enabled:
         return fn
@@ -225,7 +218,7 @@ def build_stage_model(prb: Problem, codegen: bool = True,
             ["A", "B", "lx", "lu", "lxx", "luu", "lux", "cx", "cu"])
 
     def quadratise_full() -> cs.Function:
-        return _compile(_map_over_nodes(quadratisation(np.ones(nc, bool)), N), codegen)
+        return _compile(quadratisation(np.ones(nc, bool)).map(N, "serial"), codegen)
 
     # ---- terminal: residuals and constraints on x only (+ state bounds)
     uN = cs.SX(0, 1)
@@ -254,8 +247,8 @@ def build_stage_model(prb: Problem, codegen: bool = True,
         stage_cons=stage_cons, term_cons=term_cons,
         nr=nr, nrN=nrN, nc=nc, ncN=ncN, nc_con=nc_con, ncN_con=ncN_con,
         con_reach=con_reach, conN_reach=conN_reach,
-        values=_compile(_map_over_nodes(values, N), codegen),
-        quadratise=_compile(_map_over_nodes(quadratisation(al_rows), N), codegen),
+        values=_compile(values.map(N, "serial"), codegen),
+        quadratise=_compile(quadratisation(al_rows).map(N, "serial"), codegen),
         values_term=_compile(values_term, codegen),
         quadratise_term=_compile(quad_term, codegen),
         integrate=_compile(integ.map(N + 1, "serial"), codegen),  # each line-search step
