@@ -21,6 +21,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Twist
 from hypothesis import given
 from hypothesis import strategies as st
@@ -327,14 +328,30 @@ def test_by_default_diagnostics_go_out_at_10_hz_and_count_the_ticks_between(
     assert len(out["traj"]) == 21
     sent = [(time_to_ns(m.header.stamp), m.status[0].level,
              {kv.key: kv.value for kv in m.status[0].values}) for m in out["diag"]]
-    # 10 Hz, or at once when the level rises (this scripted state never follows the plan:
-    # the real-time iterations after the bootstrap report WARN)
+    # 10 Hz, or at once when the level rises
     assert 3 <= len(sent) <= 7
     for (t0, level0, _), (t1, level1, _) in itertools.pairwise(sent):
         assert t1 - t0 >= 0.09 * NS_PER_S or level1 > level0
     for stamp, _, values in sent:  # every tick counted, also those without a status
         assert int(values["ticks"]) == (stamp - 10 * NS_PER_S) // 20_000_000 + 1
         assert float(values["solve_time_max_ms"]) >= float(values["solve_time_ms"]) > 0.0
+    node.destroy_node()
+
+
+def test_diagnostics_warn_on_solver_failures_not_on_real_time_iterations(context, walking_mpc):
+    """One iteration per tick rarely meets the solver's own tolerance (its stats say no
+    success): still OK; a failure, whose plan is the standing fallback, is WARN."""
+    node = sim_time_node(context, walking_mpc, diagnostics_rate=0.0)
+    out = drive_in_sim_time(node, 6)
+    statuses = [m.status[0] for m in out["diag"]]
+    assert len(statuses) == 6 and all(s.level == DiagnosticStatus.OK for s in statuses)
+    values = {kv.key: kv.value for kv in statuses[-1].values}
+    assert values["solver_status"] == str(node.plan.stats.get("status"))
+    node.mpc.failures = 1  # as WalkingMpc._healthy leaves it after a failed tick
+    node._publish_diagnostics(node.plan, 11 * NS_PER_S)
+    status = node._pub_diag.msgs[-1].status[0]
+    assert status.level == DiagnosticStatus.WARN and "solver failure" in status.message
+    node.mpc.failures = 0
     node.destroy_node()
 
 
@@ -397,6 +414,19 @@ def test_a_stale_state_is_not_planned_from(harness):
     h.spin_until(lambda: h.node.stale_skips > 0)
     h.spin_for(0.2)
     assert h.trajectories == [] and h.node.plan is None
+
+
+def test_a_state_stamped_in_the_future_is_not_planned_from(harness):
+    """A state stamped 10 s ahead (a sim clock against a wall clock) has a negative age,
+    which a one-sided check never catches."""
+    h = harness(state_timeout=0.2)
+    h.publish_state(age=-10.0)
+    h.spin_until(lambda: h.node.stale_skips > 0)
+    h.spin_for(0.2)
+    assert h.trajectories == [] and h.node.plan is None
+    assert h.node.last_state_age == pytest.approx(-10.0, abs=0.5)
+    h.publish_state(age=-0.05)  # within state_timeout: planned from
+    h.spin_until(lambda: h.node.plan is not None)
 
 
 def test_no_state_means_no_trajectory(harness):
@@ -464,6 +494,68 @@ def test_the_executable_follows_the_sim_clock_unless_told_otherwise():
                                                         "use_sim_time:=true"]
     user = ["mpc_node", "--ros-args", "-p", "use_sim_time:=false"]
     assert with_sim_time_default(user) == user
+
+
+def test_use_sim_time_set_in_a_params_file_is_not_overridden(tmp_path):
+    """An added '-p use_sim_time:=true' would win over the file's false: the node would
+    wait forever for a sim clock on a robot."""
+    from horizon_mpc.nodes.mpc_node import with_sim_time_default
+
+    chosen = tmp_path / "robot.yaml"
+    chosen.write_text("/**:\n  ros__parameters:\n    use_sim_time: false\n")
+    other = tmp_path / "other.yaml"
+    other.write_text("mpc:\n  ros__parameters:\n    gait: trot\n")
+    user = ["mpc_node", "--ros-args", "--params-file", str(other), "--params-file",
+            str(chosen)]
+    assert with_sim_time_default(user) == user
+    only_other = ["mpc_node", "--ros-args", "--params-file", str(other)]
+    assert with_sim_time_default(only_other)[-1] == "use_sim_time:=true"
+    missing = ["mpc_node", "--ros-args", "--params-file", str(tmp_path / "none.yaml")]
+    assert with_sim_time_default(missing)[-1] == "use_sim_time:=true"  # rcl reports it
+
+
+def test_startup_errors_end_in_one_line_and_exit_code_1_interrupts_in_0(monkeypatch):
+    """Out-of-range or mistyped parameters, bad YAML: one fatal line, exit code 1; a
+    signal while the node is being built: exit code 0 (no traceback)."""
+    import logging
+
+    import yaml
+    from rclpy.exceptions import InvalidParameterValueException
+
+    from horizon_mpc.nodes.spin import spin_until_signal
+
+    monkeypatch.setattr(logging.getLogger("horizon_mpc"), "handlers", [])  # restored after
+    logged: list[str] = []
+    monkeypatch.setattr(rclpy.logging, "get_logger", lambda name: type(
+        "L", (), {"fatal": lambda self, m: logged.append(m),
+                  "info": lambda self, m: logged.append(m)})())
+    for exc in (InvalidParameterValueException("control_rate", 0.0, "out of range"),
+                yaml.YAMLError("bad"), KeyError("FL_foot")):
+        def fail(exc=exc):
+            raise exc
+        assert spin_until_signal(fail, ["mpc_node"]) == 1
+        assert logged[-1].startswith("cannot start:") and "Traceback" not in logged[-1]
+    def bug():
+        raise ZeroDivisionError("a bug")
+    assert spin_until_signal(bug, ["mpc_node"]) == 1
+    assert "Traceback" in logged[-1]  # not a user error: the traceback is kept
+
+    def interrupted():
+        os.kill(os.getpid(), signal.SIGINT)  # as Ctrl-C while compiling
+        raise RuntimeError("compiling ... failed (the compiler was interrupted)")
+    assert spin_until_signal(interrupted, ["mpc_node"]) == 0
+    assert logged[-1] == "interrupted during start-up"
+    assert spin_until_signal(lambda: None, ["mpc_node", "--ros-args", "-p"]) == 2
+
+
+def test_an_integer_for_a_float_parameter_is_taken_at_startup(context, walking_mpc):
+    """'-p control_rate:=50' (rcl types it an integer) is 50.0, not a type error."""
+    node = sim_time_node(context, walking_mpc, control_rate=25, state_timeout=1)
+    try:
+        assert node.get_parameter("control_rate").value == 25.0
+        assert node.period == pytest.approx(0.04) and node.state_timeout == 1.0
+    finally:
+        node.destroy_node()
 
 
 @pytest.mark.slow
@@ -779,3 +871,38 @@ def test_a_node_that_cannot_start_says_why_in_one_line_and_exits_1():
     assert out.returncode == 1
     assert "cannot start: no robot config 'spot'; available:" in out.stderr + out.stdout
     assert "Traceback" not in out.stderr
+
+
+def test_the_librarys_warnings_reach_the_ros_loggers(monkeypatch):
+    """'ILQR failed ...: back to the standing warm start' is a Python logging warning of
+    the library: the executables forward it to the ROS logger (console and /rosout)."""
+    import logging
+
+    from horizon_mpc.nodes.spin import _RosLogHandler, forward_library_warnings
+
+    got: list[tuple[str, str, str]] = []
+
+    class Logger:
+        def __init__(self, name):
+            self.name = name
+
+        def warning(self, text):
+            got.append((self.name, "warning", text))
+
+        def error(self, text):
+            got.append((self.name, "error", text))
+
+    monkeypatch.setattr(rclpy.logging, "get_logger", Logger)
+    lib = logging.getLogger("horizon_mpc")
+    before = list(lib.handlers)
+    try:
+        forward_library_warnings()
+        forward_library_warnings()  # idempotent
+        assert sum(isinstance(h, _RosLogHandler) for h in lib.handlers) == 1
+        logging.getLogger("horizon_mpc.mpc.controller").warning("ILQR failed (%s)", "rti")
+        logging.getLogger("horizon_mpc.mpc.controller").info("not forwarded")
+        logging.getLogger("horizon_mpc.codegen").error("compiling failed")
+        assert got == [("horizon_mpc.mpc.controller", "warning", "ILQR failed (rti)"),
+                       ("horizon_mpc.codegen", "error", "compiling failed")]
+    finally:
+        lib.handlers[:] = before

@@ -11,7 +11,9 @@ mode needs; ``trigger: timer`` ticks at ``control_rate`` on the node's clock.
 from __future__ import annotations
 
 import gc
+import itertools
 import math
+import re
 import sys
 import time
 from collections import deque
@@ -19,6 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path as FilePath
 
 import numpy as np
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry, Path
@@ -273,10 +276,16 @@ class MpcNode(MpcParameters, Node):
         t = stamp_ns / NS_PER_S
         now_ns = self.get_clock().now().nanoseconds
         self.last_state_age = now_ns / NS_PER_S - t
-        if self.last_state_age > self.state_timeout:
+        if abs(self.last_state_age) > self.state_timeout:
             self.stale_skips += 1
-            self._warn("stale", f"the state is {self.last_state_age:.3f} s old (state_timeout "
-                       f"{self.state_timeout:g} s); not planning")
+            if self.last_state_age > 0:
+                self._warn("stale", f"the state is {self.last_state_age:.3f} s old "
+                           f"(state_timeout {self.state_timeout:g} s); not planning")
+            else:  # stamped ahead of the node's clock: clocks that do not match
+                self._warn("future", f"the state is stamped {-self.last_state_age:.3f} s "
+                           "ahead of the node's clock (more than state_timeout "
+                           f"{self.state_timeout:g} s): not planning; do the publisher and "
+                           "this node use the same clock (use_sim_time)?")
             self._publish_diagnostics(None, stamp_ns, now_ns)
             return False
         _, qj, vj = joints
@@ -358,12 +367,17 @@ class MpcNode(MpcParameters, Node):
                              now_ns: int | None = None) -> None:
         """The node's status, when ``diagnostics_rate`` says so or its level rose."""
         if plan is None:
-            level, message, stats = DiagnosticStatus.WARN, "stale state: not planning", {}
+            age = "stale" if self.last_state_age > 0 else "future-stamped"
+            level, message, stats = DiagnosticStatus.WARN, f"{age} state: not planning", {}
         else:
+            # WARN on a failure (the plan is the standing fallback), not on a real-time
+            # iteration that leaves some violation: one iteration per tick rarely reaches
+            # the solver's own tolerance, and the plan is still the one to follow
             stats = plan.stats
-            ok = bool(stats.get("success", True)) and self.mpc.failures == 0
+            ok = self.mpc.failures == 0
             level = DiagnosticStatus.OK if ok else DiagnosticStatus.WARN
-            message = "ok" if ok else f"solver: {stats.get('status')}"
+            message = "ok" if ok else (f"solver failure ({stats.get('status')}): "
+                                       "standing fallback")
             self._solve_time_max = max(self._solve_time_max, self.last_solve_time)
         now_ns = self.get_clock().now().nanoseconds if now_ns is None else now_ns
         last = self._last_diag  # a rising level (OK -> WARN) goes out at once
@@ -379,6 +393,7 @@ class MpcNode(MpcParameters, Node):
             "iterations": stats.get("iterations", math.nan),
             "cost": stats.get("cost", math.nan),
             "constraint_violation": stats.get("constraint_violation", math.nan),
+            "solver_status": stats.get("status", ""),
             "deadline_misses": self.deadline_misses,
             "state_age_ms": self.last_state_age * 1e3,
             "gait": self.mpc.settings.gait.name,
@@ -411,16 +426,35 @@ def robot_model(cfg: RobotConfig, urdf_path: str = "",
 
 
 def with_sim_time_default(argv: Sequence[str]) -> list[str]:
-    """``argv`` with ``use_sim_time:=true`` added unless the user set ``use_sim_time``.
+    """``argv`` with ``use_sim_time:=true`` added unless the user set ``use_sim_time`` (a
+    ``-p`` argument, or a ``--params-file`` that sets it).
 
     The executables' defaults work together: ``sim_node`` stamps states with the simulated
     clock it publishes on ``/clock``, so ``mpc_node`` started with no arguments follows that
     clock. On a robot, pass ``--ros-args -p use_sim_time:=false``.
     """
     argv = list(argv)
-    if any("use_sim_time" in a for a in argv):
+    if any(re.search(r"(^|:)use_sim_time:=", a) for a in argv) or any(
+            _sets_use_sim_time(path) for flag, path in itertools.pairwise(argv)
+            if flag == "--params-file"):
         return argv
     return [*argv, "--ros-args", "-p", "use_sim_time:=true"]
+
+
+def _sets_use_sim_time(params_file: str) -> bool:
+    """Whether a ``--params-file`` sets ``use_sim_time`` (for any node): then it is the
+    user's choice, which an added ``-p`` would override. An unreadable file: False (rcl
+    reports it)."""
+    def has_key(data: object) -> bool:
+        if isinstance(data, dict):
+            return "use_sim_time" in data or any(has_key(v) for v in data.values())
+        return isinstance(data, list) and any(has_key(v) for v in data)
+
+    try:
+        with open(params_file, encoding="utf-8") as fh:
+            return has_key(yaml.safe_load(fh))
+    except (OSError, yaml.YAMLError):
+        return False
 
 
 def main(args: Sequence[str] | None = None) -> int:

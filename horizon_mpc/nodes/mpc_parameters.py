@@ -14,7 +14,6 @@ import numpy as np
 from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
-    ParameterDescriptor,
     SetParametersResult,
 )
 from rclpy.parameter import Parameter
@@ -22,6 +21,7 @@ from rclpy.parameter import Parameter
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.locomotion.gaits import GAITS
 from horizon_mpc.locomotion.settings import Weights
+from horizon_mpc.nodes.declare import declare, float_range
 
 __all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "WEIGHT_FIELDS", "MpcParameters"]
 
@@ -33,8 +33,6 @@ LIVE_LIMITS = ("max_vx", "max_vy", "max_wz")
 DIAGNOSTICS_RATE = 10.0
 
 
-def _range(lo: float, hi: float) -> list[FloatingPointRange]:
-    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
 
@@ -44,12 +42,7 @@ class MpcParameters:
     def _declare(self, name: str, default: object, description: str,
                  rng: list[FloatingPointRange] | None = None,
                  irng: list[IntegerRange] | None = None, ro: bool = False) -> None:
-        desc = ParameterDescriptor(description=description, read_only=ro)
-        if rng:
-            desc.floating_point_range = rng
-        if irng:
-            desc.integer_range = irng
-        self.declare_parameter(name, default, desc)
+        declare(self, name, default, description, rng, irng, read_only=ro)
 
     def _declare_parameters(self, st: MpcSettings) -> None:
         d = self._declare
@@ -57,33 +50,33 @@ class MpcParameters:
           "(default: the config's mpc.n_nodes)", irng=[IntegerRange(
             from_value=2, to_value=500, step=1)], ro=True)
         d("dt", float(st.dt), "duration of one horizon node (s; default: the config's "
-          "mpc.dt)", _range(0.001, 0.5), ro=True)
+          "mpc.dt)", float_range(0.001, 0.5), ro=True)
         d("control_rate", 1.0 / float(self._p("dt")), "MPC ticks per second of the node "
-          "clock (trigger timer; default: 1 / dt)", _range(1, 1000), ro=True)
+          "clock (trigger timer; default: 1 / dt)", float_range(1, 1000), ro=True)
         d("iterations", int(st.iterations), "ILQR iterations per tick (default: the config's "
           "mpc.iterations)", irng=[IntegerRange(
             from_value=1, to_value=50, step=1)], ro=True)
         d("solve_budget", 0.85, "with trigger 'timer': the ILQR iterations after the first "
           "are skipped when they would end later than this fraction of the control period "
-          "after the solve started (0: always run them all)", _range(0, 10), ro=True)
+          "after the solve started (0: always run them all)", float_range(0, 10), ro=True)
         d("prepare_ahead", bool(st.prepare_ahead), "after publishing a plan, prepare the next "
           "tick's last iteration (quadratisation, backward pass): a tick is then only its "
           "feedback step from the new state (low latency); false: whole ticks", ro=True)
         d("max_extrapolation", float(st.max_extrapolation), "a state stamped up to this far "
           "(s) from the prepared tick time is predicted to it with its velocity; further: "
-          "a whole tick", _range(0, 1), ro=True)
+          "a whole tick", float_range(0, 1), ro=True)
         d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
           "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)
         d("gait", st.gait.name, f"gait ({', '.join(GAITS)}); live")
         d("step_duration", float(st.gait.step_duration), "swing duration (s); live",
-          _range(0.05, 2.0))
+          float_range(0.05, 2.0))
         d("step_height", float(st.gait.step_height), "swing apex height (m); live",
-          _range(0.0, 0.3))
+          float_range(0.0, 0.3))
         d("duty_factor", float(st.gait.duty_factor), "stance fraction of a cycle; live",
-          _range(0.05, 1.0))
+          float_range(0.05, 1.0))
         for name, vmax, unit in zip(LIVE_LIMITS, st.max_velocity, ("m/s", "m/s", "rad/s"),
                                     strict=True):
-            d(name, float(vmax), f"|{name[4:]}| command limit ({unit}); live", _range(0, 5))
+            d(name, float(vmax), f"|{name[4:]}| command limit ({unit}); live", float_range(0, 5))
         for name in WEIGHT_FIELDS:
             value = getattr(st.weights, name)
             value = [float(x) for x in value] if isinstance(value, list) else float(value)
@@ -91,16 +84,16 @@ class MpcParameters:
         d("stand_when_idle", bool(st.stand_when_idle), "zero command: the feet stay down "
           "(true) or the gait keeps stepping in place (false); live")
         d("cmd_timeout", 0.5, "a cmd_vel older than this (s, node clock) means zero command",
-          _range(0.01, 60))
+          float_range(0.01, 60))
         d("state_timeout", 0.2, "no plan from a state older than this (s, node clock)",
-          _range(0.001, 60))
+          float_range(0.001, 60))
         d("publish_points", 6, "trajectory points published per plan (nodes 0..n-1)",
           irng=[IntegerRange(from_value=1, to_value=1000, step=1)], ro=True)
         d("path_rate", 10.0, "~/predicted_base_path messages per second of the node clock "
-          "(at most one per tick; 0: every tick)", _range(0, 1000), ro=True)
+          "(at most one per tick; 0: every tick)", float_range(0, 1000), ro=True)
         d("diagnostics_rate", DIAGNOSTICS_RATE, "/diagnostics messages per second of the "
           "node clock (at most one per tick, and at once when the level rises; 0: every tick)",
-          _range(0, 1000), ro=True)
+          float_range(0, 1000), ro=True)
         self._check_trigger(self._p("trigger"))
 
     @staticmethod

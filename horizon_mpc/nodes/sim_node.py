@@ -24,7 +24,7 @@ from collections.abc import Sequence
 
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -43,6 +43,8 @@ from horizon_mpc.nodes.conversions import (
     time_to_ns,
     vector3_from_msg,
 )
+from horizon_mpc.nodes.declare import declare as declare_parameter
+from horizon_mpc.nodes.declare import float_range
 from horizon_mpc.nodes.robot_description import description_file
 from horizon_mpc.nodes.spin import spin_until_signal
 from horizon_mpc.sim.simulator import Simulator
@@ -54,8 +56,6 @@ _MAX_LAG = 0.25  # s (wall): further behind the wall clock than this, the pacing
 _FREE_RUN_SLICE = 0.002  # s (wall) of stepping per callback when running as fast as possible
 
 
-def _range(lo: float, hi: float) -> list[FloatingPointRange]:
-    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
 class SimNode(Node):
@@ -146,47 +146,44 @@ class SimNode(Node):
         def declare(name: str, default: object, description: str,
                     rng: list[FloatingPointRange] | None = None,
                     irng: list[IntegerRange] | None = None) -> None:
-            desc = ParameterDescriptor(description=description)
-            if rng:
-                desc.floating_point_range = rng
-            if irng:
-                desc.integer_range = irng
-            self.declare_parameter(name, default, desc)
+            declare_parameter(self, name, default, description, rng, irng)
 
         declare("robot", "go2", "robot config name (config/<robot>.yaml)")
         declare("config", "", "path of a robot config YAML (overrides 'robot')")
         declare("urdf_path", "", "URDF to simulate instead of the config's")
         declare("robot_description", "", "URDF XML text to simulate, as robot_state_publisher's "
                 "parameter (overrides urdf_path)")
-        declare("physics_rate", 1000.0, "physics steps per sim second (Hz)", _range(50, 20000))
+        declare("physics_rate", 1000.0, "physics steps per sim second (Hz)",
+                float_range(50, 20000))
         declare("state_rate", 500.0, "joint_states/odom/clock publish rate (Hz, sim time)",
-                _range(1, 20000))
+                float_range(1, 20000))
         declare("realtime_factor", 1.0,
-                "sim seconds per wall second; 0 = as fast as possible", _range(0, 1000))
+                "sim seconds per wall second; 0 = as fast as possible", float_range(0, 1000))
         declare("lockstep", False,
                 "advance one control_period per answered state (see doc/simulator.md)")
         declare("lockstep_timeout", 1.0,
                 "wall seconds to wait for the answer to a state; 0 = wait forever",
-                _range(0, 3600))
+                float_range(0, 3600))
         declare("control_period", 0.01, "sim seconds advanced per lockstep step",
-                _range(1e-4, 10))
+                float_range(1e-4, 10))
         declare("kp", Parameter.Type.DOUBLE, "joint P gain (N m/rad); unset = config sim.kp",
-                _range(0, 1e6))
+                float_range(0, 1e6))
         declare("kd", Parameter.Type.DOUBLE, "joint D gain (N m s/rad); unset = config sim.kd",
-                _range(0, 1e5))
+                float_range(0, 1e5))
         declare("friction", Parameter.Type.DOUBLE,
                 "foot-ground friction coefficient; unset = config sim.lateral_friction",
-                _range(0, 10))
-        declare("initial_x", 0.0, "start base x (m)", _range(-1e3, 1e3))
-        declare("initial_y", 0.0, "start base y (m)", _range(-1e3, 1e3))
-        declare("initial_yaw", 0.0, "start base yaw (rad)", _range(-math.pi, math.pi))
+                float_range(0, 10))
+        declare("initial_x", 0.0, "start base x (m)", float_range(-1e3, 1e3))
+        declare("initial_y", 0.0, "start base y (m)", float_range(-1e3, 1e3))
+        declare("initial_yaw", 0.0, "start base yaw (rad)", float_range(-math.pi, math.pi))
         declare("push_duration", 0.1, "duration of an external_wrench push (s)",
-                _range(1e-3, 60))
+                float_range(1e-3, 60))
         declare("trajectory_timeout", 0.5,
-                "a trajectory older than this (sim s) is stale: the robot holds", _range(1e-3, 1e3))
+                "a trajectory older than this (sim s) is stale: the robot holds",
+                float_range(1e-3, 1e3))
         declare("max_stamp_offset", 1.0,
                 "trajectories stamped further than this from now (sim s) are rejected",
-                _range(1e-3, 1e3))
+                float_range(1e-3, 1e3))
 
     def _param(self, name: str) -> object:
         try:

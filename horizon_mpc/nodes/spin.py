@@ -2,42 +2,70 @@
 
 from __future__ import annotations
 
+import logging
 import signal
+import sys
 import threading
+import traceback
 from collections.abc import Callable, Sequence
 
 import rclpy
 import rclpy.logging
+import yaml
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-__all__ = ["spin_until_signal"]
+__all__ = ["forward_library_warnings", "spin_until_signal"]
+
+
+# what a node's construction raises on bad parameters or files: one line, no traceback
+_USER_ERRORS = (ValueError, KeyError, OSError, ParameterException, yaml.YAMLError)
 
 
 def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None = None) -> int:
     """Create the node with ``make_node`` and spin it until SIGINT/SIGTERM; returns 0.
 
     A node that cannot be built from its parameters (``make_node`` raises ValueError,
-    KeyError or OSError: unknown robot, missing URDF, a foot the URDF lacks, ...) is
-    reported in one fatal log line that names the problem, and the exit code is 1.
+    KeyError, OSError, an rclpy ParameterException or a YAML error: unknown robot, missing
+    URDF, a foot the URDF lacks, a value out of its range, ...) is reported in one fatal
+    log line that names the problem, and the exit code is 1; any other error at start-up
+    is reported with its traceback, exit code 1. ROS arguments rcl cannot parse: one line
+    on stderr, exit code 2. SIGINT/SIGTERM during the start-up (e.g. Ctrl-C while the
+    problem compiles, which also stops the compiler): exit code 0, no traceback.
     The signals only set a flag that the spin loop checks (rclpy's own handlers would shut
     the context down under a running executor, which can surface as an RCLError).
     """
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set())
                 for sig in (signal.SIGINT, signal.SIGTERM)}
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RuntimeError as exc:  # rclpy's RCLError: e.g. a dangling '-p'
+        sys.stderr.write(f"cannot start: bad ROS arguments: {exc}\n")
+        _restore(previous)
+        return 2
     node: Node | None = None
     executor = SingleThreadedExecutor()
+    log = rclpy.logging.get_logger("horizon_mpc")
+    forward_library_warnings()
     try:
         try:
             node = make_node()
-        except (ValueError, KeyError, OSError) as exc:
+        except Exception as exc:  # noqa: BLE001 - start-up errors end the process here
+            if stop.is_set():
+                log.info("interrupted during start-up")
+                return 0
             message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-            rclpy.logging.get_logger("horizon_mpc").fatal(
-                f"cannot start: {message} ({type(exc).__name__})")
+            if isinstance(exc, _USER_ERRORS):
+                log.fatal(f"cannot start: {message} ({type(exc).__name__})")
+            else:
+                log.fatal(f"cannot start: {type(exc).__name__}: {message}\n"
+                          + traceback.format_exc())
             return 1
+        if stop.is_set():  # a signal while the node was being built
+            return 0
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
@@ -48,6 +76,37 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        _restore(previous)
     return 0
+
+
+def _restore(handlers: dict) -> None:
+    for sig, handler in handlers.items():
+        signal.signal(sig, handler)
+
+
+class _RosLogHandler(logging.Handler):
+    """Python log records -> the ROS logger of the same name (console and /rosout)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            logger = rclpy.logging.get_logger(record.name)
+            text = self.format(record)
+            if record.levelno >= logging.CRITICAL:
+                logger.fatal(text)
+            elif record.levelno >= logging.ERROR:
+                logger.error(text)
+            else:
+                logger.warning(text)
+        except Exception:  # noqa: BLE001 - logging must never raise into the caller
+            self.handleError(record)
+
+
+def forward_library_warnings() -> None:
+    """Send the library's warnings (Python ``logging`` under ``horizon_mpc``, e.g. "ILQR
+    failed ...: back to the standing warm start") to the ROS loggers, so they reach the
+    console and /rosout like the node's own. Idempotent."""
+    lib = logging.getLogger("horizon_mpc")
+    if not any(isinstance(h, _RosLogHandler) for h in lib.handlers):
+        handler = _RosLogHandler(logging.WARNING)
+        lib.addHandler(handler)

@@ -1,0 +1,42 @@
+"""Declaring the nodes' parameters: descriptions, ranges, read-only flags, and an integer
+accepted where a float is declared."""
+
+from __future__ import annotations
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+__all__ = ["declare", "float_range", "int_range"]
+
+
+def float_range(lo: float, hi: float) -> list[FloatingPointRange]:
+    """The descriptor range ``[lo, hi]`` of a float parameter (any step)."""
+    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+
+
+def int_range(lo: int, hi: int) -> list[IntegerRange]:
+    """The descriptor range ``[lo, hi]`` of an integer parameter (step 1)."""
+    return [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+
+
+def declare(node: Node, name: str, default: object, description: str,
+            rng: list[FloatingPointRange] | None = None,
+            irng: list[IntegerRange] | None = None, read_only: bool = False) -> None:
+    """Declare ``name`` with its description, range and read-only flag.
+
+    A float parameter given an integer at start-up (``-p control_rate:=50``, a YAML ``50``)
+    takes it as that float: rcl types ``50`` as an integer, and the declaration would
+    otherwise fail on the type. (Live ``ros2 param set`` keeps rclpy's strict typing.)
+    """
+    desc = ParameterDescriptor(description=description, read_only=read_only)
+    if rng:
+        desc.floating_point_range = rng
+    if irng:
+        desc.integer_range = irng
+    overrides = getattr(node, "_parameter_overrides", None)  # rclpy's start-up values
+    given = overrides.get(name) if isinstance(overrides, dict) else None
+    if (isinstance(default, float) and given is not None
+            and given.type_ == Parameter.Type.INTEGER):
+        overrides[name] = Parameter(name, value=float(given.value))
+    node.declare_parameter(name, default, desc)
