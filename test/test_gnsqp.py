@@ -130,19 +130,8 @@ def test_weights_node_sets_and_bounds_change_without_rebuild():
 
 
 def _double_integrator_with_nan_guess():
-    import casadi as cs
-
-    from horizon_mpc.problem import Problem
-
-    prb = Problem(5)
-    x = prb.create_state_variable("x", 2)
-    u = prb.create_input_variable("u", 1)
-    prb.set_dynamics(cs.vertcat(x[1], u))
-    prb.set_dt(0.1)
-    x.set_bounds([0.0, 0.0], [0.0, 0.0], nodes=0)
-    prb.create_cost("effort", u - 3)
-    prb.create_final_constraint("goal", x - np.array([0.5, 0.0]))
-    u.set_initial_guess(np.nan)
+    prb, v = build_double_integrator(n_nodes=5)
+    v["u"].set_initial_guess(np.nan)
     return prb
 
 
