@@ -906,3 +906,15 @@ def test_the_librarys_warnings_reach_the_ros_loggers(monkeypatch):
                        ("horizon_mpc.codegen", "error", "compiling failed")]
     finally:
         lib.handlers[:] = before
+
+
+def test_input_notes_of_different_kinds_are_throttled_apart():
+    """A clamp note must not silence an 'ignored fields' note of the same topic; the same
+    note with other numbers stays one kind."""
+    from horizon_mpc.nodes.mpc_node import _note_kind
+
+    clamp = _note_kind("cmd_vel", "cmd_vel [0.9, 0.0, 0.0] clamped to the limits [0.5, 0.3, 1]")
+    clamp2 = _note_kind("cmd_vel", "cmd_vel [1.5, -0.2, 0.0] clamped to the limits [0.5, 0.3, 1]")
+    ignored = _note_kind("cmd_vel", "cmd_vel linear.z/angular.x/angular.y are ignored")
+    assert clamp == clamp2 != ignored
+    assert _note_kind("odom", "x") != _note_kind("cmd_vel", "x")

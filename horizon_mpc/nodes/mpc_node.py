@@ -203,7 +203,7 @@ class MpcNode(MpcParameters, Node):
             self._warn("joint_states", f"rejected joint_states: {exc}")
             return
         for note in notes:
-            self._warn("joint_states_note", note)
+            self._warn(_note_kind("joint_states", note), note)
         self._joints_recent.append((time_to_ns(msg.header.stamp), qj, vj))
         self._maybe_tick_on_state()
 
@@ -215,7 +215,7 @@ class MpcNode(MpcParameters, Node):
             self._warn("odom", f"rejected odom: {exc}")
             return
         for note in notes:
-            self._warn("odom_note", note)
+            self._warn(_note_kind("odom", note), note)
         self._base_recent.append((time_to_ns(msg.header.stamp), pos, quat, lin, ang))
         self._maybe_tick_on_state()
 
@@ -227,7 +227,7 @@ class MpcNode(MpcParameters, Node):
             self._warn("cmd_vel", f"rejected cmd_vel: {exc}; keeping the previous command")
             return
         for note in notes:
-            self._warn("cmd_vel_note", note)
+            self._warn(_note_kind("cmd_vel", note), note)
         self._cmd = (self.now(), cmd)
 
     def _maybe_tick_on_state(self) -> None:
@@ -405,6 +405,13 @@ class MpcNode(MpcParameters, Node):
         }
         self._solve_time_max = 0.0
         self._pub_diag.publish(self._diag.filled(stamp_ns, level, message, values))
+
+
+def _note_kind(topic: str, note: str) -> str:
+    """The throttling kind of an input note: its topic and its text without the numbers,
+    so a clamp warning does not hide a note of another kind (ignored fields) on the same
+    topic, while the same note with other values stays throttled."""
+    return f"{topic}_note:" + re.sub(r"[-+]?\d+(\.\d*)?([eE][-+]?\d+)?", "#", note)
 
 
 def robot_model(cfg: RobotConfig, urdf_path: str = "",
