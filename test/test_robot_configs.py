@@ -4,7 +4,7 @@ Fast checks: the config loads, its feet and base are frames of the model, and
 ``foot_radius`` is the height of the foot frames when the simulated robot stands at its
 nominal posture. Slow: each quadruped config walks forward (0.3 m/s, solo12 0.2) for 4 s in a direct
 lockstep loop (simulator and :class:`WalkingMpc`, no ROS) with the default MPC settings,
-no code of its own.
+no code of its own, and holds its config's velocity limits all at once, then stops.
 """
 
 from __future__ import annotations
@@ -52,8 +52,10 @@ def test_foot_radius_is_the_foot_height_when_standing(robot):
     assert st.foot_contact.all()
 
 
-def _walk(robot: str, vx: float, seconds: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Lockstep loop: 1 s standing, then ``vx``; returns times, states q (rows) and the
+def _walk(robot: str, vx: float | np.ndarray, seconds: float, stop: float = math.inf
+          ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Lockstep loop: 1 s standing, then the command ``vx`` (a forward speed, or
+    (vx, vy, wz)) until ``stop`` s, then zero; returns times, states q (rows) and the
     nominal base height."""
     from horizon_mpc.mpc import WalkingMpc
     from horizon_mpc.sim.simulator import Simulator
@@ -72,7 +74,9 @@ def _walk(robot: str, vx: float, seconds: float) -> tuple[np.ndarray, np.ndarray
         qs.append(st.q.copy())
         if st.time >= seconds or _fallen(st.q, h0):
             break
-        cmd = np.array([vx if st.time >= 1.0 else 0.0, 0.0, 0.0])
+        cmd = np.zeros(3)
+        if 1.0 <= st.time < stop:
+            cmd = np.array([vx, 0.0, 0.0]) if np.ndim(vx) == 0 else np.asarray(vx, float)
         plan = (mpc.start(st.q, st.v, st.time) if plan is None
                 else mpc.update(st.time, st.q, st.v, cmd))
         n = min(6, plan.a.shape[1])
@@ -100,3 +104,19 @@ def test_each_quadruped_walks_forward_with_its_config_only(robot):
     vx = (q[sel][-1, 0] - q[sel][0, 0]) / (t[sel][-1] - t[sel][0])
     assert vx == pytest.approx(speed, rel=0.33)
     assert abs(q[-1, 1] - q[0, 1]) < 0.2  # little lateral drift
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", WALKERS)
+def test_each_quadruped_holds_its_velocity_limits_combined_then_stops(robot):
+    """The config's velocity limits (mpc.max_velocity) are ones the robot sustains: every
+    limit at once for 3 s, then a stop, without a fall (the go2 defaults made solo12,
+    anymal_c, a1 and go1 fall)."""
+    from horizon_mpc.locomotion import MpcSettings
+
+    limits = MpcSettings.from_dict(load_robot_config(robot).section("mpc")).max_velocity
+    t, q, h0 = _walk(robot, np.array(limits), 6.0, stop=4.0)
+    assert t[-1] >= 6.0 - 1e-9, f"{robot} fell at t = {t[-1]:.2f} s (limits {limits})"
+    sel = (t >= 2.5) & (t <= 4.0)
+    travelled = np.hypot(*(q[sel][-1, :2] - q[sel][0, :2])) / (t[sel][-1] - t[sel][0])
+    assert travelled > 0.3 * math.hypot(limits[0], limits[1])  # it walked, not stood
