@@ -45,7 +45,7 @@ from horizon_mpc.closed_loop_profile import (
     load_pushes,
 )
 from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen, render_replay
-from horizon_mpc.config import load_robot_config
+from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.nodes.mpc_node import MpcNode
 from horizon_mpc.nodes.mpc_process import (
@@ -96,6 +96,8 @@ class Recording:
     deadline_misses: int = 0  # the MPC node's count (solve longer than the period)
     stale_skips: int = 0  # ticks the MPC node skipped: state older than its state_timeout
     nominal_height: float = math.nan
+    # the MPC node's command limits (vx, vy m/s, wz rad/s): commands beyond are clamped
+    max_velocity: list[float] | None = None
     build_time: float = math.nan  # s (wall) until the MPC could tick (realtime: 1st plan)
     mpc_process: dict = field(default_factory=dict)  # realtime: pid, memory, CPU, exit code
     mpc_log: str = ""  # realtime: the end of the MPC process's output
@@ -134,12 +136,25 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         duration = sum(s.duration for s in segments)
     if mode not in ("lockstep", "realtime"):
         raise ValueError(f"mode must be 'lockstep' or 'realtime', got {mode!r}")
-    load_robot_config(robot)  # an unknown robot fails here, before any node or process
+    cfg = load_robot_config(robot)  # an unknown robot fails here, before any node or process
     loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
     if mode == "lockstep":
-        return _run_lockstep(robot, iterations, loop, mpc_parameters)
-    return _run_realtime(robot, iterations, loop, domain_id, mpc_parameters, mpc_command,
-                         ready_timeout)
+        rec = _run_lockstep(robot, iterations, loop, mpc_parameters)
+    else:
+        rec = _run_realtime(robot, iterations, loop, domain_id, mpc_parameters, mpc_command,
+                            ready_timeout)
+    rec.max_velocity = command_limits(cfg, mpc_parameters)
+    return rec
+
+
+def command_limits(cfg: RobotConfig, mpc_parameters: Mapping[str, object] | None = None
+                   ) -> list[float]:
+    """The MPC node's command limits (vx, vy, wz) for this config and parameters: its
+    ``max_vx``/``max_vy``/``max_wz``, else the config's ``mpc.max_velocity``."""
+    limits = MpcSettings.from_dict(cfg.section("mpc")).max_velocity
+    given = dict(mpc_parameters or {})
+    return [float(given.get(name, lim)) for name, lim in
+            zip(("max_vx", "max_vy", "max_wz"), limits, strict=True)]
 
 
 @dataclass

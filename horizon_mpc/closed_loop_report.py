@@ -97,6 +97,13 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
         entry = {"index": i, "start": start, "end": end, "command": dict(zip(AXES, cmd.tolist(),
                                                                              strict=True)),
                  "samples": int(mask.sum())}
+        if rec.max_velocity is not None:
+            lim = np.abs(np.asarray(rec.max_velocity, float))
+            clamped = np.clip(cmd, -lim, lim)
+            if not np.array_equal(clamped, cmd):
+                # the node clamps such a command: the robot is scored against what it got
+                entry["command_clamped"] = dict(zip(AXES, clamped.tolist(), strict=True))
+                cmd = clamped
         if mask.any():
             err = actual[mask] - cmd
             entry["rmse"] = dict(zip(AXES, np.sqrt(np.mean(err**2, axis=0)).tolist(),

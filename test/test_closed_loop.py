@@ -184,6 +184,33 @@ def test_other_robots_walk_forward_with_their_configs_only(robot):
     assert v[:, 0].mean() > 0.1  # it walks forward (tracking quality is reported, not gated)
 
 
+def test_a_segment_beyond_the_limits_is_scored_against_the_clamped_command():
+    """The node clamps 1.2 m/s to the 0.6 limit: a robot doing 0.6 tracked it perfectly."""
+    from horizon_mpc.closed_loop import command_limits
+    from horizon_mpc.config import load_robot_config
+
+    rec = Recording(nominal_height=0.3, max_velocity=[0.6, 0.5, 0.8])
+    q0 = np.r_[0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0, np.zeros(12)]
+    for ti in np.arange(0.0, 3.0, 0.02):
+        rec.t.append(float(ti))
+        rec.q.append(q0)
+        rec.v.append(np.r_[0.6, 0.0, 0.0, 0.0, 0.0, -0.3, np.zeros(12)])
+        rec.cmd.append(np.zeros(3))
+        rec.cmd_mpc.append(np.zeros(3))
+        rec.contact.append(np.ones(4, bool))
+    s = summarise(rec, [Segment(3.0, vx=1.2, wz=-0.3)])
+    seg = s["segments"][0]
+    assert seg["command"] == {"vx": 1.2, "vy": 0.0, "wz": -0.3}  # what was asked
+    assert seg["command_clamped"] == {"vx": 0.6, "vy": 0.0, "wz": -0.3}  # what it got
+    assert seg["rmse"]["vx"] == pytest.approx(0.0) and seg["rmse"]["wz"] == pytest.approx(0.0)
+    rec.max_velocity = None  # limits unknown: scored against the command as given
+    assert summarise(rec, [Segment(3.0, vx=1.2)])["segments"][0]["rmse"]["vx"] == \
+        pytest.approx(0.6)
+    # the limits of a run: the config's, or the node parameters given
+    assert command_limits(load_robot_config("solo12")) == [0.4, 0.3, 0.6]
+    assert command_limits(load_robot_config("go2"), {"max_vx": 0.3}) == [0.3, 0.5, 0.8]
+
+
 # ---------------------------------------------------------------------- summary of the ticks
 def test_the_summary_counts_ticks_per_sim_second_and_keeps_the_bootstrap_apart():
     """10 control periods of 20 ms, 9 ticks (one period missed), the first one the bootstrap."""
