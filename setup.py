@@ -79,6 +79,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
         (f"share/{PACKAGE}/config/motions", sorted(glob("config/motions/*.yaml"))),
+        (f"share/{PACKAGE}/config/commands", sorted(glob("config/commands/*.yaml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.py") + glob("launch/*.xml")
                                            + glob("launch/*.yaml"))),
         (f"lib/{PACKAGE}", [f"scripts/{name}" for name in EXECUTABLES]),

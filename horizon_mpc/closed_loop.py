@@ -383,8 +383,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m horizon_mpc.closed_loop",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--robot", default="go2", help="robot config name (default go2)")
-    ap.add_argument("--profile", default=str(DEFAULT_PROFILE),
-                    help="command profile YAML (default config/commands/default.yaml)")
+    ap.add_argument("--profile", default=DEFAULT_PROFILE,
+                    help="command profile: a YAML file, or the name of one in "
+                         "config/commands (default: 'default')")
     ap.add_argument("--out", default="out/closed_loop", help="output folder")
     ap.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     ap.add_argument("--duration", type=float, default=None,

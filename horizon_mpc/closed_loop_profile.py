@@ -11,9 +11,23 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-__all__ = ["DEFAULT_PROFILE", "Push", "Segment", "command_at", "load_profile", "load_pushes"]
+from horizon_mpc.config import find_config_file
 
-DEFAULT_PROFILE = Path(__file__).resolve().parent.parent / "config" / "commands" / "default.yaml"
+__all__ = ["DEFAULT_PROFILE", "Push", "Segment", "command_at", "load_profile", "load_pushes",
+           "profile_file"]
+
+DEFAULT_PROFILE = "default"  # config/commands/default.yaml (installed under share/horizon_mpc)
+
+
+def profile_file(name_or_path: str | Path) -> Path:
+    """The YAML file of a command profile: a path (``.yaml``/``.yml``), or the name of one
+    in ``config/commands`` (the source tree's, or the installed copy under
+    ``share/horizon_mpc``: see :func:`horizon_mpc.config.config_dirs`).
+
+    Raises:
+        FileNotFoundError: no such profile (the message lists the available names).
+    """
+    return find_config_file(name_or_path, "command profile", subdir="commands")
 
 
 @dataclass
@@ -36,8 +50,9 @@ class Push:
 
 
 def load_pushes(path: str | Path) -> list[Push]:
-    """The optional ``pushes:`` list of a profile YAML (``{time, force: [fx, fy, fz],
-    duration}``); empty when the profile has none."""
+    """The optional ``pushes:`` list of a profile YAML or name (``{time, force: [fx, fy,
+    fz], duration}``); empty when the profile has none."""
+    path = profile_file(path)
     with open(path, encoding="utf-8") as fh:
         data = yaml.safe_load(fh)
     items = data.get("pushes", []) if isinstance(data, dict) else []
@@ -57,7 +72,9 @@ def load_pushes(path: str | Path) -> list[Push]:
 
 
 def load_profile(path: str | Path) -> list[Segment]:
-    """Segments of a command profile YAML (a list, or a mapping with ``segments:``)."""
+    """Segments of a command profile YAML or name (a list, or a mapping with
+    ``segments:``)."""
+    path = profile_file(path)
     with open(path, encoding="utf-8") as fh:
         data = yaml.safe_load(fh)
     items = data.get("segments") if isinstance(data, dict) else data

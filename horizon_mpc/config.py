@@ -65,17 +65,20 @@ class RobotConfig:
 
 
 def config_dirs() -> list[Path]:
-    """Folders searched for ``<robot>.yaml``, in order."""
+    """Folders searched for ``<robot>.yaml``, in order: the source tree's ``config`` (a
+    checkout or an editable install), the ament index's ``share/horizon_mpc/config`` (the
+    workspace ``AMENT_PREFIX_PATH`` names first, as ``ros2 run`` resolves it), then the
+    interpreter's prefix (a pip install into a venv)."""
     here = Path(__file__).resolve().parent
     dirs = [here.parent / "config"]
-    dirs.append(Path(sys.prefix) / "share" / "horizon_mpc" / "config")
     try:  # a colcon/ament install
         from ament_index_python.packages import get_package_share_directory
 
         dirs.append(Path(get_package_share_directory("horizon_mpc")) / "config")
     except Exception:  # noqa: BLE001 - no ament index in this environment: fine
         pass
-    return dirs
+    dirs.append(Path(sys.prefix) / "share" / "horizon_mpc" / "config")
+    return list(dict.fromkeys(dirs))
 
 
 def find_config_file(name_or_path: str | Path, what: str = "robot config",

@@ -252,9 +252,25 @@ def test_colcon_style_install_puts_executables_in_lib_and_registers_the_package(
         assert os.access(prefix / "lib" / PACKAGE / exe, os.X_OK), exe
     share = prefix / "share" / PACKAGE
     assert (share / "package.xml").is_file()
-    assert sorted(p.name for p in (share / "config").glob("*.yaml")) == sorted(
-        p.name for p in (ROOT / "config").glob("*.yaml"))
+    # every config, also those of subfolders (motions, command profiles)
+    assert sorted(str(p.relative_to(share / "config")) for p in (share / "config").rglob(
+        "*.yaml")) == sorted(str(p.relative_to(ROOT / "config"))
+                             for p in (ROOT / "config").rglob("*.yaml"))
     assert _get_package_prefix([str(prefix)]) == prefix
+    # the installed code finds its data through the ament index, not the source tree
+    site = next(prefix.glob("lib/python3*/site-packages"))
+    probe = ("import horizon_mpc, sys; from horizon_mpc.closed_loop_profile import "
+             "load_profile, profile_file; from horizon_mpc.config import find_config_file; "
+             "print(horizon_mpc.__file__); print(profile_file('default')); "
+             "print(find_config_file('go2')); print(len(load_profile('default')))")
+    env = {**os.environ, "PYTHONPATH": str(site), "AMENT_PREFIX_PATH": str(prefix)}
+    out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    module, profile, config, n_segments = out.stdout.split()
+    assert module.startswith(str(site))
+    assert Path(profile) == share / "config" / "commands" / "default.yaml"
+    assert Path(config) == share / "config" / "go2.yaml" and int(n_segments) > 0
 
 
 def _venv_distributions() -> list[str]:
@@ -285,7 +301,8 @@ def test_pip_install_puts_launchers_in_lib_and_console_scripts_in_bin(tmp_path):
 
 REQUIRED_ROSDEP_KEYS = {
     "rclpy", "std_msgs", "std_srvs", "sensor_msgs", "nav_msgs", "geometry_msgs",
-    "trajectory_msgs", "rosgraph_msgs", "diagnostic_msgs",
+    "trajectory_msgs", "rosgraph_msgs", "diagnostic_msgs", "rcl_interfaces",
+    "builtin_interfaces", "launch", "launch_ros",
     "pinocchio", "example-robot-data", "casadi-pip", "python3-pybullet-pip",
     "python3-numpy", "python3-scipy", "python3-matplotlib", "python3-yaml", "python3-pil",
 }
