@@ -23,6 +23,7 @@ __all__ = ["fallen", "render_replay", "roll_pitch_yaw", "summarise", "write_repo
 SETTLING = 1.0  # s after a segment starts before its tracking error counts
 FALL_HEIGHT = 0.6  # fraction of the nominal base height below which the robot has fallen
 FALL_TILT = 0.5  # rad of |roll| or |pitch| beyond which the robot has fallen
+FALL_EPISODE = 2.0  # s: fallen-condition onsets closer than this to the last are one fall
 FRAME_PERIOD = 0.05  # s of sim time between two GIF frames (real-time playback)
 AXES = ("vx", "vy", "wz")
 
@@ -113,8 +114,14 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
         start = end
     fall_flags = np.array([fallen(qi, rec.nominal_height) for qi in q]) if len(q) else \
         np.zeros(0, bool)
-    # a fall = an onset of the fallen condition
+    # a fall = an onset of the fallen condition more than FALL_EPISODE after the previous
+    # onset (a robot on its side crosses the tilt threshold back and forth as it tumbles)
     onsets = np.flatnonzero(fall_flags & ~np.concatenate(([False], fall_flags[:-1])))
+    episodes: list[int] = []
+    for j, k in enumerate(onsets):
+        if j == 0 or t[k] - t[onsets[j - 1]] > FALL_EPISODE:
+            episodes.append(int(k))
+    onsets = np.array(episodes, dtype=int)
     xy = q[:, :2] if len(q) else np.zeros((0, 2))
     sim_time = float(t[-1] - t[0]) if len(t) > 1 else 0.0
     period = float(np.median(np.diff(t))) if len(t) > 1 else math.nan

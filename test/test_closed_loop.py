@@ -211,6 +211,32 @@ def test_a_segment_beyond_the_limits_is_scored_against_the_clamped_command():
     assert command_limits(load_robot_config("go2"), {"max_vx": 0.3}) == [0.3, 0.5, 0.8]
 
 
+def test_one_tumble_is_one_fall_and_a_second_fall_later_counts_again():
+    """A robot rolling over crosses the tilt threshold back and forth: one fall; a new fall
+    more than FALL_EPISODE later: two."""
+    from horizon_mpc.closed_loop_report import FALL_EPISODE
+
+    def recording(tilted_at):
+        rec = Recording(nominal_height=0.3)
+        for ti in np.arange(0.0, 8.0, 0.02):
+            tilt = 1.0 if any(a <= ti < b for a, b in tilted_at) else 0.0
+            quat = [np.sin(tilt / 2), 0.0, 0.0, np.cos(tilt / 2)]  # roll = tilt
+            rec.t.append(float(ti))
+            rec.q.append(np.r_[0.0, 0.0, 0.3, quat, np.zeros(12)])
+            rec.v.append(np.zeros(18))
+            rec.cmd.append(np.zeros(3))
+            rec.cmd_mpc.append(np.zeros(3))
+            rec.contact.append(np.ones(4, bool))
+        return rec
+
+    tumble = [(2.0, 2.3), (2.5, 2.9), (3.1, 4.0)]  # three onsets within 1.1 s
+    assert summarise(recording(tumble), [Segment(8.0)])["falls"]["times"] == \
+        pytest.approx([2.0])
+    later = [*tumble, (3.1 + FALL_EPISODE + 1.0, 8.0)]
+    falls = summarise(recording(later), [Segment(8.0)])["falls"]
+    assert falls["count"] == 2 and falls["times"] == pytest.approx([2.0, 6.1])
+
+
 # ---------------------------------------------------------------------- summary of the ticks
 def test_the_summary_counts_ticks_per_sim_second_and_keeps_the_bootstrap_apart():
     """10 control periods of 20 ms, 9 ticks (one period missed), the first one the bootstrap."""
