@@ -263,3 +263,23 @@ def test_the_dynamics_pattern_covers_every_nonzero_of_the_walking_jacobians(walk
     assert outside.size and not outside.any()
     if riccati_c.available():
         assert solver._backward.keywords["pattern"].mask.sum() == pattern.sum()
+
+
+def test_the_pose_reference_stays_within_the_leash_of_the_measured_pose(walking_mpc):
+    """The integral action's reference runs ahead of a robot that lags, at most
+    settings.pose_leash (m) and yaw_leash (rad) away (no wind-up)."""
+    mpc = walking_mpc
+    saved = (mpc.pose_ref.copy(), mpc.cmd.copy(), mpc.settings.pose_leash)
+    try:
+        q = mpc.wp.q_nominal.copy()
+        mpc.pose_ref = np.zeros(3)
+        mpc.cmd[:] = [-0.3, 0.0, 0.5]
+        for _ in range(200):  # 4 s of commanded motion, the robot not moving at all
+            mpc._advance_pose_ref(q, 0.02)
+        assert np.hypot(*(mpc.pose_ref[:2] - q[:2])) == pytest.approx(mpc.settings.pose_leash)
+        assert abs(mpc.pose_ref[2]) == pytest.approx(mpc.settings.yaw_leash)
+        mpc.settings.pose_leash = 0.1
+        mpc._advance_pose_ref(q, 0.02)
+        assert np.hypot(*(mpc.pose_ref[:2] - q[:2])) == pytest.approx(0.1)
+    finally:
+        mpc.pose_ref, mpc.cmd[:], mpc.settings.pose_leash = saved[0], saved[1], saved[2]

@@ -375,11 +375,12 @@ class WalkingMpc:
         c, s = math.cos(yaw), math.sin(yaw)
         x, y, yaw = x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz
         # never wind up: keep the reference within reach of the measured pose
-        dist = math.hypot(x - qx, y - qy)
-        if dist > 0.15:
-            x, y = qx + (x - qx) * 0.15 / dist, qy + (y - qy) * 0.15 / dist
+        dist, leash, yaw_leash = (math.hypot(x - qx, y - qy), self.settings.pose_leash,
+                                  self.settings.yaw_leash)
+        if dist > leash:
+            x, y = qx + (x - qx) * leash / dist, qy + (y - qy) * leash / dist
         yaw_q = _yaw(q)
-        yaw = yaw_q + min(max(_wrap(yaw - yaw_q), -0.3), 0.3)
+        yaw = yaw_q + min(max(_wrap(yaw - yaw_q), -yaw_leash), yaw_leash)
         self.pose_ref = np.array([x, y, yaw])
 
     def _set_references(self, t: float) -> None:
