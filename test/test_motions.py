@@ -135,11 +135,28 @@ def test_locked_joint_patterns_reduce_the_model_and_unknown_ones_raise():
         robot_model(cfg, ["j_leg*"])
 
 
-def test_cli_rejects_an_unknown_setting_before_solving(capsys):
+def test_cli_rejects_bad_settings_before_solving_in_one_line(capsys):
+    """An unknown key, or a value of the wrong kind: one error line, exit code 2, no
+    solve (a raw TypeError from deep in the problem before)."""
     from horizon_mpc.motions.cli import main
 
-    with pytest.raises(ValueError, match="unknown setting"):
-        main(["leap", "--set", "distnace=0.5", "--no-animation"])
+    for setting, text in (("distnace=0.5", "unknown setting"),
+                          ("cycles=abc", "setting 'cycles' must be a whole number"),
+                          ("cycles=1.5", "setting 'cycles' must be a whole number"),
+                          ("dt=fast", "setting 'dt' must be a number")):
+        motion = "leap" if setting.startswith("distnace") else "turn"
+        assert main([motion, "--set", setting, "--no-animation"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("motion: error:") and text in err and "Traceback" not in err
+
+
+def test_motion_settings_take_whole_floats_and_ints_as_their_kinds():
+    from horizon_mpc.motions.settings import load_motion_config
+    from horizon_mpc.motions.turn import TurnSettings
+
+    st = load_motion_config("turn").settings_for(TurnSettings, None, {"cycles": 2.0, "dt": 1})
+    assert st.cycles == 2 and isinstance(st.cycles, int)
+    assert st.dt == 1.0 and isinstance(st.dt, float)
 
 
 # --------------------------------------------------------------------------------------------

@@ -44,16 +44,53 @@ class MotionConfig:
         """``cls`` (a dataclass) filled from the file for ``robot``, then ``overrides``.
 
         Raises:
-            ValueError: a key that ``cls`` does not have (the message lists the known ones).
+            ValueError: a key that ``cls`` does not have (the message lists the known ones),
+                or a value of another kind than the setting's default (a number where a
+                whole number is due, text for a number, ...: named with the key).
         """
         values = {**self.settings, **self.robots.get(robot or self.robot, {}),
                   **(overrides or {})}
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - names)
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - set(fields))
         if unknown:
             raise ValueError(f"{self.source or self.motion}: unknown setting(s) {unknown} for "
-                             f"motion {self.motion!r}; known: {sorted(names)}")
-        return cls(**values)
+                             f"motion {self.motion!r}; known: {sorted(fields)}")
+        return cls(**{k: _checked_value(k, v, _default(fields[k])) for k, v in values.items()})
+
+
+def _default(field: dataclasses.Field) -> Any:
+    if field.default is not dataclasses.MISSING:
+        return field.default
+    if field.default_factory is not dataclasses.MISSING:
+        return field.default_factory()
+    return None
+
+
+def _checked_value(key: str, value: Any, default: Any) -> Any:
+    """``value`` as the kind of ``default`` (an int for an int setting, a float for a float
+    one, a list for a list one); ValueError naming ``key`` otherwise. Settings without a
+    default (or a None one) are passed as given."""
+    def bad(kind: str) -> ValueError:
+        return ValueError(f"setting {key!r} must be {kind}, got {value!r}")
+
+    is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise bad("true or false")
+    elif isinstance(default, int):
+        if not (is_number and float(value).is_integer()):
+            raise bad("a whole number")
+        return int(value)
+    elif isinstance(default, float):
+        if not is_number:
+            raise bad("a number")
+        return float(value)
+    elif isinstance(default, (list, tuple)):
+        if not isinstance(value, (list, tuple)):
+            raise bad(f"a list like {list(default)!r}")
+    elif isinstance(default, str) and not isinstance(value, str):
+        raise bad("text")
+    return value
 
 
 def load_motion_config(motion: str | Path) -> MotionConfig:
