@@ -428,3 +428,4 @@ def test_motion_executable_writes_every_output(tmp_path):
         "summary.json"]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["duration"] == 0.6 and summary["nodes"] == 30
+
