@@ -117,11 +117,7 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
     # a fall = an onset of the fallen condition more than FALL_EPISODE after the previous
     # onset (a robot on its side crosses the tilt threshold back and forth as it tumbles)
     onsets = np.flatnonzero(fall_flags & ~np.concatenate(([False], fall_flags[:-1])))
-    episodes: list[int] = []
-    for j, k in enumerate(onsets):
-        if j == 0 or t[k] - t[onsets[j - 1]] > FALL_EPISODE:
-            episodes.append(int(k))
-    onsets = np.array(episodes, dtype=int)
+    onsets = onsets[np.diff(t[onsets], prepend=-np.inf) > FALL_EPISODE]
     xy = q[:, :2] if len(q) else np.zeros((0, 2))
     sim_time = float(t[-1] - t[0]) if len(t) > 1 else 0.0
     period = float(np.median(np.diff(t))) if len(t) > 1 else math.nan

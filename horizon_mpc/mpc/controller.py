@@ -375,8 +375,8 @@ class WalkingMpc:
         c, s = math.cos(yaw), math.sin(yaw)
         x, y, yaw = x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz
         # never wind up: keep the reference within reach of the measured pose
-        dist, leash, yaw_leash = (math.hypot(x - qx, y - qy), self.settings.pose_leash,
-                                  self.settings.yaw_leash)
+        leash, yaw_leash = self.settings.pose_leash, self.settings.yaw_leash
+        dist = math.hypot(x - qx, y - qy)
         if dist > leash:
             x, y = qx + (x - qx) * leash / dist, qy + (y - qy) * leash / dist
         yaw_q = _yaw(q)

@@ -21,7 +21,7 @@ from rclpy.parameter import Parameter
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.locomotion.gaits import GAITS
 from horizon_mpc.locomotion.settings import Weights
-from horizon_mpc.nodes.declare import declare, float_range
+from horizon_mpc.nodes.declare import declare, float_range, int_range
 
 __all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "WEIGHT_FIELDS", "MpcParameters"]
 
@@ -31,9 +31,6 @@ LIVE_LIMITS = ("max_vx", "max_vy", "max_wz")
 # Hz of the node clock: a status every fifth 50 Hz tick (diagnostic tools poll at ~1 Hz);
 # its values summarise the ticks in between (solve_time_max_ms, ticks, deadline_misses)
 DIAGNOSTICS_RATE = 10.0
-
-
-
 
 
 class MpcParameters:
@@ -47,15 +44,13 @@ class MpcParameters:
     def _declare_parameters(self, st: MpcSettings) -> None:
         d = self._declare
         d("n_nodes", int(st.n_nodes), "horizon nodes (intervals) of the walking problem "
-          "(default: the config's mpc.n_nodes)", irng=[IntegerRange(
-            from_value=2, to_value=500, step=1)], ro=True)
+          "(default: the config's mpc.n_nodes)", irng=int_range(2, 500), ro=True)
         d("dt", float(st.dt), "duration of one horizon node (s; default: the config's "
           "mpc.dt)", float_range(0.001, 0.5), ro=True)
         d("control_rate", 1.0 / float(self._p("dt")), "MPC ticks per second of the node "
           "clock (trigger timer; default: 1 / dt)", float_range(1, 1000), ro=True)
         d("iterations", int(st.iterations), "ILQR iterations per tick (default: the config's "
-          "mpc.iterations)", irng=[IntegerRange(
-            from_value=1, to_value=50, step=1)], ro=True)
+          "mpc.iterations)", irng=int_range(1, 50), ro=True)
         d("solve_budget", 0.85, "with trigger 'timer': the ILQR iterations after the first "
           "are skipped when they would end later than this fraction of the control period "
           "after the solve started (0: always run them all)", float_range(0, 10), ro=True)
@@ -88,7 +83,7 @@ class MpcParameters:
         d("state_timeout", 0.2, "no plan from a state older than this (s, node clock)",
           float_range(0.001, 60))
         d("publish_points", 6, "trajectory points published per plan (nodes 0..n-1)",
-          irng=[IntegerRange(from_value=1, to_value=1000, step=1)], ro=True)
+          irng=int_range(1, 1000), ro=True)
         d("path_rate", 10.0, "~/predicted_base_path messages per second of the node clock "
           "(at most one per tick; 0: every tick)", float_range(0, 1000), ro=True)
         d("diagnostics_rate", DIAGNOSTICS_RATE, "/diagnostics messages per second of the "

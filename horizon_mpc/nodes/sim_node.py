@@ -17,6 +17,7 @@ drive the simulator and a controller deterministically in one process and one ex
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import time
@@ -24,7 +25,6 @@ from collections.abc import Sequence
 
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -54,8 +54,6 @@ __all__ = ["SimNode", "main"]
 _WARN_PERIOD = 2.0  # s (wall) between two warnings of the same kind
 _MAX_LAG = 0.25  # s (wall): further behind the wall clock than this, the pacing re-anchors
 _FREE_RUN_SLICE = 0.002  # s (wall) of stepping per callback when running as fast as possible
-
-
 
 
 class SimNode(Node):
@@ -143,10 +141,7 @@ class SimNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
-        def declare(name: str, default: object, description: str,
-                    rng: list[FloatingPointRange] | None = None,
-                    irng: list[IntegerRange] | None = None) -> None:
-            declare_parameter(self, name, default, description, rng, irng)
+        declare = functools.partial(declare_parameter, self)
 
         declare("robot", "go2", "robot config name (config/<robot>.yaml)")
         declare("config", "", "path of a robot config YAML (overrides 'robot')")
