@@ -152,3 +152,86 @@ def test_the_violation_of_a_nan_point_is_nan():
     lbg, ubg = tr.bounds_g()
     assert np.isnan(tr.violation(w, np.zeros(tr.ng), lbx, ubx, lbg, ubg))
     assert tr.violation(np.zeros(tr.nw), np.zeros(tr.ng), lbx, ubx, lbg, ubg) >= 0.0
+
+
+def _via_point(n_nodes: int = 10):
+    """Double integrator from rest to x = 1, passing x = 0.3 at node 5; effort cost."""
+    import casadi as cs
+
+    from horizon_mpc import Problem
+
+    prb = Problem(n_nodes)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.vertcat(x[1], u))
+    prb.set_dt(0.1)
+    x.set_bounds([0, 0], [0, 0], nodes=0)
+    via = prb.create_constraint("via", x[0] - 0.3, nodes=5)
+    prb.create_cost("effort", u, weight=0.1)
+    prb.create_final_constraint("goal", x - np.array([1.0, 0.0]))
+    return prb, u, via
+
+
+def _fresh_cost(edit) -> float:
+    prb, u, via = _via_point()
+    edit(u, via)
+    solver = make_solver("ipopt", prb)
+    assert solver.solve()
+    return solver.stats.cost
+
+
+@pytest.mark.parametrize("edit", [
+    lambda u, via: via.set_nodes([]),                      # the active constraint dropped
+    lambda u, via: via.set_bounds(-np.inf, np.inf),        # its bounds opened
+    lambda u, via: u.set_bounds(-9.0, 9.0),                # an input bound relaxed
+], ids=["constraint_dropped", "constraint_opened", "bound_relaxed"])
+def test_a_warm_resolve_after_relaxing_the_problem_finds_the_new_optimum(edit):
+    """The multipliers kept from the last solve belong to rows that no longer bind: they
+    must not make the old point pass the KKT test (it did, at iteration 0)."""
+    prb, u, via = _via_point()
+    u.set_bounds(-8.0, 8.0)  # active in the first solve
+    solver = make_solver("gnsqp", prb)
+    assert solver.solve()
+    first = solver.stats.cost
+    edit(u, via)
+    expected = _fresh_cost(lambda u_, via_: (u_.set_bounds(-8.0, 8.0), edit(u_, via_)))
+    assert solver.solve(), solver.stats.status
+    assert expected < first - 1e-3  # the edit matters
+    assert solver.stats.cost == pytest.approx(expected, rel=1e-6)
+
+
+def _around_obstacle(n_nodes: int = 50):
+    """Unicycle from (0, 0, 0) to (4, 0, 0) around a disc of radius 0.7 at (2, 0): a
+    curved constraint (Gauss-Newton ignores its curvature)."""
+    import casadi as cs
+
+    from horizon_mpc import Problem
+
+    prb = Problem(n_nodes)
+    p = prb.create_state_variable("p", 3)
+    u = prb.create_input_variable("u", 2)
+    prb.set_dynamics(cs.vertcat(u[0] * cs.cos(p[2]), u[0] * cs.sin(p[2]), u[1]))
+    prb.set_dt(5.0 / n_nodes)
+    p.set_bounds([0, 0, 0], [0, 0, 0], nodes=0)
+    u.set_bounds([-2, -3], [2, 3])
+    s = np.linspace(0, 4, n_nodes + 1)
+    p.set_initial_guess(np.vstack([s, 0.8 * np.sin(np.pi * s / 4), np.zeros(n_nodes + 1)]))
+    u.set_initial_guess([0.8, 0.0])
+    prb.create_constraint("obstacle", (p[0] - 2) ** 2 + p[1] ** 2, bounds=(0.49, np.inf))
+    prb.create_final_constraint("goal", p - np.array([4.0, 0, 0]))
+    prb.create_cost("effort", u, weight=5.0 / n_nodes)
+    return prb
+
+
+def test_started_at_ipopts_optimum_it_converges_without_its_multipliers():
+    # from the optimum with zero multipliers no step decreases the merit (the line search
+    # failed at iteration 0): the QP's multipliers settle the KKT test
+    ip = make_solver("ipopt", _around_obstacle())
+    assert ip.solve()
+    prb = _around_obstacle()
+    for name in ("p", "u"):
+        prb.get_variable(name).set_initial_guess(ip.solution[name])
+    gn = make_solver("gnsqp", prb, {"max_iter": 300})
+    assert gn.solve(), gn.stats.status
+    # the Gauss-Newton fixed point lies a little off IPOPT's (curvature of the disc)
+    assert gn.stats.cost == pytest.approx(ip.stats.cost, rel=1e-4)

@@ -22,3 +22,23 @@ def test_cartpole_example_in_the_documentation_runs():
     assert solver.stats.cost == pytest.approx(67.0675, abs=1e-4)
     assert solver.solution["u"].shape == (1, 100)
     np.testing.assert_allclose(solver.solution["q"][:, -1], [0.0, np.pi], atol=1e-8)
+
+
+README = DOC.parents[1] / "README.md"
+
+
+@pytest.mark.parametrize("solver_call", [
+    'make_solver("ilqr", prb)', 'make_solver("ipopt", prb)',
+    'make_solver("gnsqp", prb, {"max_iter": 200})'])
+def test_the_readme_example_solves_with_each_solver_its_comment_names(solver_call):
+    text = README.read_text()
+    section = text[text.index("## The library in a few lines"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    assert 'make_solver("ilqr", prb)' in code
+    namespace: dict = {}
+    exec(compile(code.replace('make_solver("ilqr", prb)', solver_call), str(README), "exec"),
+         namespace)  # noqa: S102 - our own documentation
+    solver = namespace["solver"]
+    assert solver.stats.success, solver.stats.status
+    assert solver.stats.cost == pytest.approx(73.3816, abs=1e-3)
+    assert solver.solution["x"].shape == (2, 61)

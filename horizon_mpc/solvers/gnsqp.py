@@ -16,9 +16,14 @@ l1 merit ``phi(w) = f(w) + mu ||viol(g(w))||_1``; ``mu`` never decreases and sta
 the largest QP multiplier. Multipliers follow ``lam += alpha (lam_QP - lam)``.
 
 Convergence: the constraint violation (dynamics, constraints, bounds; inf-norm) is below
-``tol_constr`` and either the KKT stationarity ``||grad f + J_g' lam_g + lam_x||_inf``
-(divided by IPOPT's multiplier scale ``max(1, mean |lam| / 100)``) is below ``tol`` or the
-last step ``||alpha d||_inf`` is below ``tol_step``.
+``tol_constr`` and either the KKT stationarity ``||grad f + J_g' lam_g + lam_x||_inf`` and
+complementarity (``|lam| *`` distance to the bound it acts on), both divided by IPOPT's
+multiplier scale ``max(1, mean |lam| / 100)``, are below ``tol``, or the last step
+``||alpha d||_inf`` is below ``tol_step``. A solve starts from the last solve's
+multipliers, with the signs the current bounds allow (a row opened since then frees its
+multiplier). When no step decreases the merit, the QP's multipliers are taken once
+without a step and the KKT test decides (a start at a solution); a second failure ends
+the solve ("line search failed").
 
 Gauss-Newton ignores the curvature of the constraints (``lam' d2g``): convergence is
 linear, fast when residuals dominate (tracking MPC), slower when the multipliers are large
@@ -181,12 +186,15 @@ class GnSqpSolver(NlpSolver):
         lbg, ubg = (b[pg] for b in tr.bounds_g())
         p = tr.parameters()
         w = np.clip(tr.initial_w()[pw], lbx, ubx)
-        lam_g = self.lam_g[pg] if self.lam_g is not None else np.zeros(tr.ng)
-        lam_x = self.lam_x[pw] if self.lam_x is not None else np.zeros(tr.nw)
+        # warm-start multipliers, of the sign the current bounds allow (a bound removed
+        # since the last solve frees its multiplier)
+        lam_g = _signed(self.lam_g[pg], lbg, ubg) if self.lam_g is not None else np.zeros(tr.ng)
+        lam_x = _signed(self.lam_x[pw], lbx, ubx) if self.lam_x is not None else np.zeros(tr.nw)
         history: list[dict[str, float]] = []
         self._merit_history: list[float] = []
         self._elastic_steps = 0
         mu, status, alpha, step, success = 0.0, "max_iter reached", 1.0, np.inf, False
+        multipliers_only = False  # the last iteration only took the QP's multipliers
         timing = {"linearize": 0.0, "qp": 0.0, "line_search": 0.0}
         t0 = time.perf_counter()
         it = 0
@@ -200,13 +208,19 @@ class GnSqpSolver(NlpSolver):
                         / max(1, tr.ng + tr.nw)) / 100.0
             stat = float(stat) / scale
             viol = tr.violation(w, g, lbx, ubx, lbg, ubg)
+            # a multiplier on a bound the point does not touch (one relaxed since a warm
+            # start) makes a stationary-looking but wrong KKT point
+            comp = max(_complementarity(lam_g, g, lbg, ubg),
+                       _complementarity(lam_x, w, lbx, ubx)) / scale
             history.append({"iteration": it, "cost": f, "violation": viol,
-                            "stationarity": stat, "step": step, "alpha": alpha, "mu": mu})
+                            "stationarity": stat, "complementarity": comp, "step": step,
+                            "alpha": alpha, "mu": mu})
             if not (math.isfinite(f) and math.isfinite(viol) and np.isfinite(grad).all()):
                 status = ("not finite at the initial guess (NaN/inf in the guess or the "
                           "parameters)" if it == 0 else "not finite after a step")
                 break
-            if viol <= o["tol_constr"] and (stat <= o["tol"] or step <= o["tol_step"]):
+            if viol <= o["tol_constr"] and ((stat <= o["tol"] and comp <= o["tol"])
+                                            or step <= o["tol_step"]):
                 status, success = "converged", True
                 break
             if it == o["max_iter"]:
@@ -221,9 +235,15 @@ class GnSqpSolver(NlpSolver):
             tic = time.perf_counter()
             alpha = self._line_search(w, d, p, f, g, grad, mu, slack, lbg, ubg)
             timing["line_search"] += time.perf_counter() - tic
+            if alpha is None and not multipliers_only:
+                # no descent from here: at a solution (a warm start from one, whose
+                # multipliers were not kept) the KKT test with the QP's multipliers decides
+                multipliers_only, lam_g, lam_x, step = True, lg_qp, lx_qp, np.inf
+                continue
             if alpha is None:
                 status, alpha = "line search failed", 0.0
                 break
+            multipliers_only = False
             w = np.clip(w + alpha * d, lbx, ubx)
             lam_g = lam_g + alpha * (lg_qp - lam_g)
             lam_x = lam_x + alpha * (lx_qp - lam_x)
@@ -264,3 +284,18 @@ class GnSqpSolver(NlpSolver):
             alpha *= 0.5
         return None
 
+
+
+def _signed(lam: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+    """``lam`` with the signs the bounds allow (CasADi: > 0 upper bound, < 0 lower bound)."""
+    lam = np.where(np.isinf(ub), np.minimum(lam, 0.0), lam)
+    return np.where(np.isinf(lb), np.maximum(lam, 0.0), lam)
+
+
+def _complementarity(lam: np.ndarray, val: np.ndarray, lb: np.ndarray,
+                     ub: np.ndarray) -> float:
+    """Largest ``|lam| * distance to the bound lam acts on`` (0 where lam is 0)."""
+    dist = np.where(lam > 0, ub - val, np.where(lam < 0, val - lb, 0.0))
+    prod = np.abs(lam) * np.where(np.isfinite(dist), np.abs(dist), 0.0)
+    # an infinite distance with a nonzero multiplier is impossible after _signed
+    return float(np.max(prod, initial=0.0))
