@@ -6,6 +6,7 @@ import pytest
 from ocps import pendulum_swing_up
 
 from horizon_mpc import Problem, make_solver
+from horizon_mpc.examples import pendulum_dynamics
 from horizon_mpc.examples.cartpole import build_cartpole
 
 OPTS = {"codegen": False, "max_iter": 400}
@@ -348,3 +349,80 @@ def test_a_nan_parameter_is_named_as_such_not_as_a_bad_guess():
     assert solver.solve() is False and solver.stats.status == "initial guess not finite"
     u.set_initial_guess(0.0)
     assert solver.solve() is True
+
+
+def _start_at(fixed: bool, start_row: tuple | None):
+    """Double integrator to x = 1 in 1.5 s; node 0 fixed at rest or not, and a row on node 0."""
+    prb = Problem(15)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.vertcat(x[1], u))
+    prb.set_dt(0.1)
+    prb.create_cost("effort", u, weight=0.1)
+    prb.create_final_constraint("goal", x - np.array([1.0, 0.0]))
+    if fixed:
+        x.set_bounds([0, 0], [0, 0], nodes=0)
+    if start_row is not None:
+        expr, bounds = start_row
+        prb.create_constraint("start", expr(x), nodes=0, bounds=bounds)
+    return prb
+
+
+@pytest.mark.parametrize("start_row, violation", [
+    ((lambda x: x[0] - 0.5, None), 0.5),       # an equality the fixed state breaks
+    ((lambda x: x[1], (0.2, 1.0)), 0.2),       # an inequality it breaks
+])
+def test_a_fixed_initial_state_that_breaks_a_node0_row_is_reported_infeasible(
+        start_row, violation):
+    # the rows are left out of the steps (nothing can change them) but not out of the
+    # violation: they were, and ILQR reported 'converged' with violation 7e-7
+    solver = make_solver("ilqr", _start_at(True, start_row))
+    assert not solver.solve()
+    assert solver.stats.status.startswith("infeasible")
+    assert solver.stats.constraint_violation == pytest.approx(violation)
+    assert solver.stats.iterations < 30  # stopped once the rest was solved, not at max_iter
+
+
+def test_a_node0_row_met_by_the_fixed_state_changes_nothing():
+    plain = make_solver("ilqr", _start_at(True, None))
+    assert plain.solve()
+    met = make_solver("ilqr", _start_at(True, (lambda x: x[0], None)))
+    assert met.solve(), met.stats.status
+    assert met.stats.cost == pytest.approx(plain.stats.cost, rel=1e-9)
+
+
+def test_a_warm_receding_solve_never_claims_convergence_above_the_optimum():
+    """Pendulum MPC with an active input bound, shifted between solves: the steps were
+    rejected until the regularisation reached 1e6, and the tiny regularised decrease passed
+    for stationarity ('converged' 3 % above IPOPT's optimum). Every success must now be the
+    optimum."""
+    def build():
+        prb = Problem(30)
+        x = prb.create_state_variable("x", 2)
+        u = prb.create_input_variable("u", 1)
+        ref = prb.create_parameter("ref", 1)
+        prb.set_dynamics(cs.vertcat(x[1], pendulum_dynamics(x[0], x[1], u)))
+        prb.set_dt(0.05)
+        u.set_bounds(-4, 4)
+        prb.create_cost("track", x[0] - ref, weight=5.0)
+        prb.create_cost("velocity", x[1], weight=0.1)
+        prb.create_cost("effort", u, weight=0.01)
+        ref.assign(0.8)
+        return prb, x
+
+    prb, x = build()
+    solver = make_solver("ilqr", prb)
+    step = prb.discrete_dynamics()
+    state, successes = np.zeros(2), 0
+    for _ in range(4):
+        x.set_bounds(state, state, nodes=0)
+        if solver.solve():
+            successes += 1
+            ref_prb, ref_x = build()
+            ref_x.set_bounds(state, state, nodes=0)
+            ipopt = make_solver("ipopt", ref_prb)
+            assert ipopt.solve()
+            assert solver.stats.cost == pytest.approx(ipopt.stats.cost, rel=1e-4)
+        state = step(state, solver.solution["u"][:, 0], [], []).full().ravel()
+        solver.shift()
+    assert successes >= 1

@@ -208,6 +208,7 @@ class IlqrSolver(Solver):
         ulb = prb.stacked("input", "lower_bounds", copy=False)
         uub = prb.stacked("input", "upper_bounds", copy=False)
         self.x_init = None
+        self._fixed_rows = None  # (rows, lb, ub) of the state-only rows skipped at node 0
         if np.all(np.isfinite(xlb[:, 0])) and np.array_equal(xlb[:, 0], xub[:, 0]):
             self.x_init = xlb[:, 0].copy()
         # stage rows: constraints, then x bounds, then u bounds
@@ -218,7 +219,10 @@ class IlqrSolver(Solver):
                                   lambda: stacked_bounds(m.stage_cons)[:2])
             act = stacked_active(m.stage_cons)[:, :N]
             if self.x_init is not None:
-                # a fixed initial state cannot be changed: nothing to enforce at node 0
+                # a fixed initial state cannot be changed: nothing to enforce at node 0,
+                # but what those rows violate there still counts (an infeasible problem)
+                rows = np.flatnonzero(act[:, 0] & ~self._uses_input)
+                self._fixed_rows = (rows, clb[rows, 0], cub[rows, 0]) if rows.size else None
                 act[~self._uses_input, 0] = False
             lb[:, :nc] = np.where(act, clb[:, :N], -np.inf).T
             ub[:, :nc] = np.where(act, cub[:, :N], np.inf).T
@@ -310,10 +314,12 @@ class IlqrSolver(Solver):
             if stats is None:
                 return None
             cost, gap_l1, gap_max, eq_l1, eq_max, al, al_viol = stats
-            return {"gap": ce.gap.copy(), "r": ce.r.copy(), "c": ce.c.copy(),
+            c = ce.c.copy()
+            return {"gap": ce.gap.copy(), "r": ce.r.copy(), "c": c,
                     "rN": ce.rN.reshape(1, m.nrN).copy(), "cN": ce.cN.reshape(1, m.ncN).copy(),
                     "d0": ce.d0.copy(), "eq_l1": eq_l1, "cost": cost, "al": al,
-                    "gap_l1": gap_l1, "viol": max(gap_max, eq_max, al_viol)}
+                    "gap_l1": gap_l1, "viol_fixed": (vf := self._fixed_violation(c)),
+                    "viol_free": (v := max(gap_max, eq_max, al_viol)), "viol": max(v, vf)}
         gap, r, c = self._values(X[:N].T, U.T, self._singles_per_node(), self.P[:, :N], X[1:].T)
         rN, cN = self._values_term(X[N], self.S, self.P[:, N])
         gap, r, c = gap.T.copy(), r.T.copy(), c.T.copy()  # (N, ndx), (N, nr), (N, nc)
@@ -333,8 +339,17 @@ class IlqrSolver(Solver):
         return {
             "gap": gap, "r": r, "c": c, "rN": rN, "cN": cN, "d0": d0,
             "eq_l1": eq_l1, "cost": cost, "al": al + alN, "gap_l1": gap_l1,
-            "viol": max(gap_max, eq_max, al_viol, alN_viol),
+            "viol_fixed": (vf := self._fixed_violation(c)),
+            "viol_free": (v := max(gap_max, eq_max, al_viol, alN_viol)), "viol": max(v, vf),
         }
+
+    def _fixed_violation(self, c: np.ndarray) -> float:
+        """Violation of the state-only rows at a fixed node 0 (left out of the steps)."""
+        if self._fixed_rows is None:
+            return 0.0
+        rows, lb, ub = self._fixed_rows
+        c0 = c[0, rows]
+        return float(np.max(np.maximum(lb - c0, c0 - ub), initial=0.0))
 
     def _merit(self, ev: dict[str, Any], nu: float) -> float:
         return ev["cost"] + ev["al"] + nu * (ev["gap_l1"] + ev["eq_l1"])
@@ -550,8 +565,13 @@ class IlqrSolver(Solver):
         inner = 0  # iterations since the last multiplier update
         for it in range(1, n_iter + 1):
             ev, info = self._iterate(ev)
-            stationary = abs(info.get("expected", 0.0)) <= o["tol"] * (1.0 + ev["cost"]) or (
-                info.get("step_norm", 1.0) < 1e-10)
+            # a step of the regularised model understates the gradient by ~mu where mu
+            # dominates the Hessian: both measures are scaled back (a pendulum whose steps
+            # were rejected until mu reached 1e6 was called converged 3 % above the optimum)
+            damping = max(1.0, self.mu)
+            stationary = (abs(info.get("expected", 0.0)) * damping
+                          <= o["tol"] * (1.0 + ev["cost"])
+                          or info.get("step_norm", 1.0) * damping < 1e-10)
             # multipliers and penalties: a converging solve updates them when the inner
             # (fixed-multiplier) problem is nearly stationary or every `al_max_inner`
             # iterations (updating after every iteration made the penalty ratchet to rho_max
@@ -578,6 +598,10 @@ class IlqrSolver(Solver):
                          ev["viol"], info["alpha"], self.mu)
             if not rti and stationary and ev["viol"] <= o["tol_constraint"]:
                 status, converged = "converged", True
+                break
+            if not rti and stationary and ev["viol_free"] <= o["tol_constraint"] < (
+                    ev["viol_fixed"]):
+                status = "infeasible: the fixed initial state violates constraints at node 0"
                 break
             if info.get("backward_failed"):
                 status = "regularisation limit reached"
