@@ -57,7 +57,8 @@ class ContactTerms:
     def set_schedule(self, stance: np.ndarray, swing_z: np.ndarray | None = None) -> None:
         """Activate stance/swing terms per node from ``stance`` (n_feet, N+1) booleans.
 
-        ``swing_z``: world height of each swinging foot per node (n_feet, N+1).
+        ``swing_z``: world height of each foot per node (n_feet, N+1): the swing profile
+        while it swings, the ground while it stands.
         """
         self.set_stance(stance)
         if swing_z is not None:
@@ -73,12 +74,14 @@ class ContactTerms:
             self.velocity[foot].set_nodes(st)
             self.friction[foot].set_nodes(st & stage)
             self.zero_force[foot].set_nodes(~st & stage)
-            if foot in self.clearance:
+            # a clearance cost stays on every node (stance: the ground height, so a landing
+            # foot is pulled onto the ground); a constraint would repeat the stance rows
+            if isinstance(self.clearance.get(foot), Constraint):
                 self.clearance[foot].set_nodes(~st)
 
     def set_swing_height(self, swing_z: np.ndarray) -> None:
-        """World height (m) of each swinging foot per node, (n_feet, N+1); no-op without
-        clearance terms."""
+        """World height (m) of each foot per node, (n_feet, N+1): the swing profile, the
+        ground in stance (see :meth:`set_schedule`); no-op without clearance terms."""
         if self.swing_z is not None:
             self.swing_z.assign(swing_z)
 
@@ -94,7 +97,10 @@ def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q, v, f, mu: 
     ``v_foot + omega_foot x (-r e_z) = 0``; force inside the linearised
     friction cone ``|f_x|, |f_y| <= mu f_z`` and ``f_z >= 0`` (5 rows, stage nodes).
     Swing: force zero (3 rows); clearance: the foot height follows the parameter
-    ``swing_z`` (a constraint, a cost of weight ``clearance_weight``, or None).
+    ``swing_z`` (a constraint on swing nodes, or a cost of weight ``clearance_weight`` on
+    every node, where ``swing_z`` is the ground height in stance; or None). Without that
+    cost in stance a plan could land a foot above the ground: the stance rows hold the
+    contact point still wherever it is.
     All terms start active on every node; call ``ContactTerms.set_schedule``.
     """
     terms = ContactTerms()
