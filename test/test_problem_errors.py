@@ -268,3 +268,86 @@ def test_nan_bounds_and_crossed_one_sided_bounds_are_refused(prb):
     con = prb.create_constraint("c", prb.get_variable("x")[0])
     with pytest.raises(ValueError, match="NaN bound"):
         con.set_bounds(np.nan, 0.0)
+
+
+@pytest.mark.parametrize("build, error, match", [
+    (lambda p, x, u: p.create_constraint("c", cs.MX.sym("m", 1)), TypeError, "MX"),
+    (lambda p, x, u: p.create_cost("c", "x"), TypeError, "string 'x'"),
+    (lambda p, x, u: p.set_dynamics(cs.MX.sym("m", 2)), TypeError, "dynamics: got a CasADi MX"),
+    (lambda p, x, u: p.set_dynamics([x[1], "u"]), TypeError, "dynamics: got the string"),
+    (lambda p, x, u: p.set_dt(float("inf")), ValueError, "finite number > 0"),
+    (lambda p, x, u: p.set_dt(float("nan")), ValueError, "finite number > 0"),
+    (lambda p, x, u: p.set_dt("0.1"), TypeError, "dt: got the string"),
+    (lambda p, x, u: p.create_constraint("c", x[0], bounds=1.0), TypeError, r"pair \(lb, ub\)"),
+    (lambda p, x, u: p.set_stacked_initial_guess("states", np.zeros((2, 11))), KeyError,
+     "kinds are: state"),
+], ids=["mx_term", "string_cost", "mx_dynamics", "string_in_list", "dt_inf", "dt_nan",
+        "dt_string", "scalar_bounds", "unknown_kind"])
+def test_expressions_and_values_of_the_wrong_kind_are_named(prb, build, error, match):
+    # raw CasADi 'Wrong number or type of arguments for overloaded function' and
+    # KeyError('states') before; inf dt was accepted and failed at solve time
+    x, u = prb.get_variable("x"), prb.get_variable("u")
+    with pytest.raises(error, match=match):
+        build(prb, x, u)
+
+
+def test_dynamics_may_be_a_list_of_expressions(prb):
+    x, u = prb.get_variable("x"), prb.get_variable("u")
+    prb.set_dynamics([x[1], u])
+    assert prb.dynamics.shape == (2, 1)
+
+
+def test_a_single_variable_refuses_a_node_set_it_would_ignore():
+    p = Problem(5)
+    x = p.create_state_variable("x", 1)
+    T = p.create_single_variable("T", 1)
+    p.set_dynamics(x * T)
+    with pytest.raises(ValueError, match="one value for the whole horizon"):
+        T.set_bounds(0.1, 1.0, nodes=3)
+    T.set_bounds(0.1, 1.0)  # without nodes: fine
+    np.testing.assert_array_equal(T.lower_bounds, [[0.1]])
+
+
+@pytest.mark.parametrize("name, opts, match", [
+    ("ilqr", {"max_iter": "a"}, "'max_iter' of solver 'ilqr' must be an int"),
+    ("ipopt", {"tol": "small"}, "'tol' of solver 'ipopt' must be a number"),
+    ("gnsqp", {"warm_start": 1}, "'warm_start' of solver 'gnsqp' must be a bool"),
+    ("gnsqp", {"max_iter": 10.5}, "must be an int"),
+])
+def test_options_of_the_wrong_type_are_refused_by_name(prb, name, opts, match):
+    with pytest.raises(TypeError, match=match):
+        make_solver(name, prb, opts)
+
+
+def test_options_of_the_right_kind_pass(prb):
+    solver = make_solver("ilqr", prb, {"max_iter": np.int64(5), "tol": 1, "verbose": False})
+    assert solver.opts["max_iter"] == 5
+
+
+def test_an_unavailable_qp_solver_is_named_at_the_build(prb):
+    with pytest.raises(ValueError, match="QP solver 'nope' is not available.*qrqp"):
+        make_solver("gnsqp", prb, {"qp_solver": "nope"})
+
+
+def test_ipopt_reports_the_returned_points_violation_when_it_never_ran(prb):
+    # Invalid_Option stops IPOPT before any evaluation: it reported violation 0 and a
+    # garbage iteration count for an initial guess that violates the goal by 1
+    prb.get_variable("x").set_bounds([0, 0], [0, 0], nodes=0)
+    prb.create_final_constraint("goal", prb.get_variable("x") - np.array([1.0, 0.0]))
+    solver = make_solver("ipopt", prb, {"linear_solver": "ma27"})  # no HSL library here
+    assert not solver.solve()
+    assert solver.stats.constraint_violation == pytest.approx(1.0)
+    assert solver.stats.iterations == 0
+
+
+def test_ilqr_feedback_of_the_wrong_size_keeps_the_preparation(prb):
+    x = prb.get_variable("x")
+    x.set_bounds([0, 0], [0, 0], nodes=0)
+    prb.create_cost("effort", prb.get_variable("u"))
+    prb.create_final_cost("goal", x - np.array([1.0, 0.0]), weight=10.0)
+    solver = make_solver("ilqr", prb, {"rti": True})
+    assert solver.prepare()
+    with pytest.raises(ValueError, match="nx = 2"):
+        solver.feedback(np.zeros(3))
+    assert solver.prepared
+    assert solver.feedback(np.zeros(2))

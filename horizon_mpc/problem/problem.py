@@ -18,6 +18,7 @@ by ``(x_o, u_o)`` for every node offset ``o`` a term uses.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Iterable
 
 import casadi as cs
@@ -195,7 +196,7 @@ class Problem:
         """
         if not self.states:
             raise RuntimeError("create the state variables before setting the dynamics")
-        xdot = cs.SX(xdot) if not isinstance(xdot, cs.SX) else xdot
+        xdot = self._as_sx(xdot, "dynamics")
         if xdot.shape != (self.ndx, 1):
             raise ValueError(f"dynamics: expected an expression of shape ({self.ndx}, 1) "
                              f"(tangent of the stacked states), got {xdot.shape}")
@@ -210,13 +211,13 @@ class Problem:
 
     def set_dt(self, dt: float | SingleVariable | Parameter | cs.SX) -> None:
         """Set the interval duration: a number, a single variable or a parameter."""
-        if isinstance(dt, (int, float, np.floating, np.integer)):
-            if not dt > 0:
-                raise ValueError(f"dt must be > 0, got {dt}")
+        if isinstance(dt, (int, float, np.floating, np.integer)) and not isinstance(dt, bool):
+            if not (dt > 0 and math.isfinite(dt)):
+                raise ValueError(f"dt must be a finite number > 0, got {dt}")
             self._dt = float(dt)
             self._revision += 1
             return
-        dt = cs.SX(dt) if not isinstance(dt, cs.SX) else dt
+        dt = self._as_sx(dt, "dt")
         if dt.shape != (1, 1):
             raise ValueError(f"dt must be a scalar, got an expression of shape {dt.shape}")
         if cs.depends_on(dt, self.x) or cs.depends_on(dt, self.u):
@@ -339,6 +340,25 @@ class Problem:
                         known[off[i].name()] = f"{v.name}.offset({k})"
         return known
 
+    @staticmethod
+    def _as_sx(expr, what: str) -> cs.SX:
+        """``expr`` as an SX column source: SX, numbers, numpy/DM arrays, or a list/tuple
+        of those (stacked); anything else (MX, strings) is a TypeError naming ``what``."""
+        if isinstance(expr, cs.SX):
+            return expr
+        if isinstance(expr, cs.MX):
+            raise TypeError(f"{what}: got a CasADi MX expression; build it from the "
+                            "problem's variables, which are SX")
+        if isinstance(expr, (list, tuple)) and any(isinstance(e, (cs.SX, cs.MX)) for e in expr):
+            return cs.vertcat(*(Problem._as_sx(e, what) for e in expr))
+        if isinstance(expr, str):
+            raise TypeError(f"{what}: got the string {expr!r}, not an expression")
+        try:
+            return cs.SX(expr)
+        except (NotImplementedError, TypeError, ValueError, RuntimeError):
+            raise TypeError(f"{what}: expected a CasADi SX expression of the problem's "
+                            f"variables or numbers, got {type(expr).__name__}") from None
+
     def _check_symbols(self, expr: cs.SX, what: str, allow_offsets: bool = True) -> None:
         known = self._known_symbols(allow_offsets)
         unknown = [s.name() for s in cs.symvar(expr) if s.name() not in known]
@@ -366,7 +386,7 @@ class Problem:
             raise ValueError(f"term name must be a non-empty string, got {name!r}")
         if name in self.constraints or name in self.costs:
             raise ValueError(f"a constraint or cost called {name!r} already exists")
-        expr = cs.SX(expr) if not isinstance(expr, cs.SX) else expr
+        expr = self._as_sx(expr, f"{cls.kind} {name!r}")
         if expr.is_empty() or expr.shape[1] != 1:
             if expr.shape[0] == 1 and expr.shape[1] > 1:
                 expr = expr.T
@@ -484,4 +504,7 @@ class Problem:
     def set_stacked_initial_guess(self, kind: str, values: np.ndarray) -> None:
         """Write a stacked array (as from :meth:`stacked`, shape (dim, n_values)) back into
         the variables of ``kind``."""
+        if kind not in self._groups:
+            raise KeyError(f"unknown variable kind {kind!r}; kinds are: "
+                           f"{', '.join(self._groups)}")
         self._groups[kind].set_initial_guess(values)

@@ -114,6 +114,9 @@ class Constraint(Term):
         self._ub = np.zeros((self.dim, self.n_nodes + 1))
         self.bounds_revision = self.revision  # changes with the bounds only
         if bounds is not None:
+            if not (isinstance(bounds, (tuple, list)) and len(bounds) == 2):
+                raise TypeError(f"constraint {self.name!r}: bounds must be a pair (lb, ub), "
+                                f"got {bounds!r}")
             self.set_bounds(*bounds)
 
     def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:

@@ -214,6 +214,9 @@ class SingleVariable(Variable):
         super().__init__(name, dim, 1)
 
     def _columns(self, nodes: NodeSelection) -> tuple[slice, int]:
+        if nodes is not None:  # one value for every node: a node set would be ignored
+            raise ValueError(f"single variable {self.name!r} has one value for the whole "
+                             f"horizon: call without nodes (got nodes={nodes!r})")
         return slice(0, 1), 1
 
 

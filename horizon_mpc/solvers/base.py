@@ -16,6 +16,7 @@ After every solve the solution is written back into the variables' initial guess
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -84,7 +85,31 @@ class Solver:
         if unknown:
             raise ValueError(f"unknown option(s) {sorted(unknown)} for solver {self.name!r}; "
                              f"options are: {sorted(known)}")
+        for key, value in opts.items():
+            if key in known:
+                self._check_option_type(key, value, known[key])
         return {**known, **opts}
+
+    def _check_option_type(self, key: str, value: Any, default: Any) -> None:
+        """TypeError unless ``value`` is of the default's kind (bool, int, real number,
+        string, mapping); options whose default is None take anything."""
+        if isinstance(default, bool):
+            ok, kind = isinstance(value, (bool, np.bool_)), "a bool"
+        elif isinstance(default, int):
+            ok, kind = isinstance(value, numbers.Integral) and not isinstance(
+                value, (bool, np.bool_)), "an int"
+        elif isinstance(default, float):
+            ok, kind = isinstance(value, numbers.Real) and not isinstance(
+                value, (bool, np.bool_)), "a number"
+        elif isinstance(default, str):
+            ok, kind = isinstance(value, str), "a string"
+        elif isinstance(default, dict):
+            ok, kind = isinstance(value, dict), "a dict"
+        else:
+            return
+        if not ok:
+            raise TypeError(f"option {key!r} of solver {self.name!r} must be {kind}, got "
+                            f"{value!r} ({type(value).__name__})")
 
     def _passthrough_keys(self, opts: dict[str, Any]) -> list[str]:
         """Option keys handed to a backend unchecked (e.g. ``ipopt.*``)."""

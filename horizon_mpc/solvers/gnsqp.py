@@ -103,6 +103,7 @@ class GnSqpSolver(NlpSolver):
                              f"{general} need a full Hessian: use the 'ipopt' solver, or write "
                              "them as residuals with create_cost()")
         super().__init__(prb, opts)
+        _check_qp_solver(self.opts["qp_solver"])
         tr = self.transcription = Transcription(
             prb, sym=self.opts["sym"], constraint_rows=self.opts["constraint_rows"])
         # The SQP works on w and g sorted stage-wise (see Transcription.node_order): the
@@ -134,6 +135,8 @@ class GnSqpSolver(NlpSolver):
         """Change one option; a new QP solver is built on the next solve if needed."""
         if key in ("sym", "constraint_rows") and value != self.opts[key]:
             raise ValueError(f"option {key!r} fixes the NLP; set it when building the solver")
+        if key == "qp_solver":
+            _check_qp_solver(value)
         super().set_option(key, value)
         if key in ("qp_solver", "qp_options", "regularization"):
             self._qp.clear()
@@ -299,3 +302,9 @@ def _complementarity(lam: np.ndarray, val: np.ndarray, lb: np.ndarray,
     prod = np.abs(lam) * np.where(np.isfinite(dist), np.abs(dist), 0.0)
     # an infinite distance with a nonzero multiplier is impossible after _signed
     return float(np.max(prod, initial=0.0))
+
+
+def _check_qp_solver(name: str) -> None:
+    if not cs.has_conic(name):
+        raise ValueError(f"gnsqp: QP solver {name!r} is not available in this CasADi; try "
+                         f"one of {sorted(n for n in QP_DEFAULTS if cs.has_conic(n))}")

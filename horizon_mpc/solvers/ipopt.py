@@ -66,6 +66,8 @@ class IpoptSolver(NlpSolver):
         self.transcription = Transcription(
             prb, sym=self.opts["sym"], constraint_rows=self.opts["constraint_rows"])
         self._solvers: dict[bool, cs.Function] = {}
+        nlp = self.transcription.nlp  # the returned point's f and g, whatever IPOPT filled
+        self._fg = cs.Function("ipopt_fg", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]])
         self.lam_x: np.ndarray | None = None
         self.lam_g: np.ndarray | None = None
         self.w: np.ndarray | None = None
@@ -116,19 +118,25 @@ class IpoptSolver(NlpSolver):
         res = solver(**args)
         elapsed = time.perf_counter() - t0
         st = solver.stats()
-        w, g = res["x"].full().ravel(), res["g"].full().ravel()
+        w = res["x"].full().ravel()
+        # f and g of the returned point evaluated here: IPOPT leaves them unset when it
+        # stops before its first evaluation (e.g. Invalid_Option: violation 0 was reported
+        # for a point violating by 3.9)
+        f, g = self._fg(w, args["p"])
+        g = g.full().ravel()
         self.w = w
         self.lam_x, self.lam_g = res["lam_x"].full().ravel(), res["lam_g"].full().ravel()
         self._split_solution(*tr.unpack(w))
         s = self.stats
         s.success = bool(st.get("success", False))
         s.status = str(st.get("return_status", "unknown"))
-        s.iterations = int(st.get("iter_count", 0))
+        # iter_count is garbage when IPOPT stopped before iterating (no iteration log then)
+        s.iterations = int(st.get("iter_count", 0)) if "iterations" in st else 0
         s.time = elapsed
-        s.cost = float(res["f"])
+        s.cost = float(f)
         s.constraint_violation = tr.violation(w, g, lbx, ubx, lbg, ubg)
         if s.status == "Invalid_Number_Detected":
-            # IPOPT stopped on a NaN/inf of the functions: its f (0) and g say nothing
+            # IPOPT stopped on a NaN/inf of the functions: its point says nothing
             s.cost = s.constraint_violation = math.nan
         s.history = []
         s.extra = {"warm": warm}

@@ -689,14 +689,19 @@ class IlqrSolver(Solver):
 
         Raises:
             RuntimeError: no :meth:`prepare` awaits its feedback.
+            ValueError: ``x0`` is not of shape (nx,) (the preparation stays).
         """
         if self._prepared is None:
             raise RuntimeError("ilqr feedback() needs a successful prepare() first")
+        m = self.model
+        x0 = np.asarray(x0, dtype=float)
+        if x0.size != m.nx:
+            raise ValueError(f"ilqr feedback(): x0 of shape {x0.shape}; the state has nx = "
+                             f"{m.nx} entries")
+        x0 = x0.reshape(m.nx)
         t_start = time.perf_counter()
         ev, q, proj, bw, info = self._prepared
         self._prepared = None
-        m = self.model
-        x0 = np.asarray(x0, dtype=float).reshape(m.nx)
         st = self.stats
         if not np.all(np.isfinite(x0)):
             st.success, st.status = False, "feedback: initial state not finite"
