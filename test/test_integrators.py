@@ -70,3 +70,19 @@ def test_leapfrog_is_second_order():
     errors = [np.linalg.norm(final_state(F, T_FINAL / n, n) - exact) for n in steps]
     slope = np.polyfit(np.log(T_FINAL / steps), np.log(errors), 1)[0]
     assert abs(slope - 2) < 0.3
+
+
+def test_leapfrog_refuses_states_not_ordered_positions_then_velocities():
+    # declared per axis ([x1, v1], [x2, v2]) its step was silently wrong (0.27625 against
+    # rk4's 0.275 for x1 after one step); the layout is now checked
+    from horizon_mpc import make_solver
+
+    prb = Problem(5)
+    a = prb.create_state_variable("a", 2)
+    b = prb.create_state_variable("b", 2)
+    u = prb.create_input_variable("u", 2)
+    prb.set_dynamics(cs.vertcat(a[1], u[0], b[1], u[1]))
+    prb.set_dt(0.1)
+    with pytest.raises(ValueError, match=r"\[positions, velocities\]"):
+        prb.transcribe("multiple_shooting", integrator="leapfrog")
+        make_solver("ipopt", prb)

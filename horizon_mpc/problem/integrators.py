@@ -54,6 +54,14 @@ def leapfrog(f: Derivative, integrate: Retraction, x: cs.SX, dt: cs.SX) -> cs.SX
         raise ValueError(f"leapfrog needs a tangent space [position, velocity] of even "
                          f"dimension; got {ndx}")
     h = ndx // 2
+    # the layout it needs, checked: the position rate must not read the position half
+    # (states declared per axis, [x1, v1, x2, v2], gave a wrong step without a word)
+    npos = x.shape[0] - h
+    if cs.depends_on(f(x)[:h], x[:npos]):
+        raise ValueError("leapfrog needs the states ordered [positions, velocities] with "
+                         "position rates that depend on the velocities only (qdot = v); "
+                         "these dynamics' first half depends on the first half of the state: "
+                         "declare the positions first, or use rk4")
     zeros = cs.SX.zeros(h)
     # kick: half a step on the velocity
     x_half = integrate(x, cs.vertcat(zeros, 0.5 * dt * f(x)[h:]))
