@@ -235,3 +235,26 @@ def test_started_at_ipopts_optimum_it_converges_without_its_multipliers():
     assert gn.solve(), gn.stats.status
     # the Gauss-Newton fixed point lies a little off IPOPT's (curvature of the disc)
     assert gn.stats.cost == pytest.approx(ip.stats.cost, rel=1e-4)
+
+
+@pytest.mark.parametrize("u_max", [1.0, 3.0])
+def test_an_infeasible_problem_is_reported_as_such_early(u_max):
+    """Rest to rest over 1 m in 1 s needs |u| >= 4: with |u| <= u_max the elastic QP can
+    never reduce the violation; gnsqp ran to max_iter (500 iterations, 13 s on a pendulum)."""
+    prb, u, via = _via_point()
+    via.set_nodes([])
+    u.set_bounds(-u_max, u_max)
+    solver = make_solver("gnsqp", prb, {"max_iter": 100})
+    assert not solver.solve()
+    assert solver.stats.status.startswith("locally infeasible")
+    assert solver.stats.iterations <= 10
+    assert solver.stats.constraint_violation > 0.1
+
+
+def test_a_feasible_problem_that_starts_infeasible_still_converges():
+    prb, u, via = _via_point()
+    u.set_bounds(-6.0, 6.0)  # feasible (the optimum needs 5.45 without the via point)
+    via.set_nodes([])
+    u.set_initial_guess(0.0)
+    solver = make_solver("gnsqp", prb)
+    assert solver.solve(), solver.stats.status

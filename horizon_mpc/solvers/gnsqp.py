@@ -23,7 +23,8 @@ multiplier scale ``max(1, mean |lam| / 100)``, are below ``tol``, or the last st
 multipliers, with the signs the current bounds allow (a row opened since then frees its
 multiplier). When no step decreases the merit, the QP's multipliers are taken once
 without a step and the KKT test decides (a start at a solution); a second failure ends
-the solve ("line search failed").
+the solve ("line search failed"). Five elastic steps in a row that predict no less
+violation than the current one end it as "locally infeasible".
 
 Gauss-Newton ignores the curvature of the constraints (``lam' d2g``): convergence is
 linear, fast when residuals dominate (tracking MPC), slower when the multipliers are large
@@ -67,6 +68,9 @@ from horizon_mpc.solvers.nlp_solver import NlpSolver
 __all__ = ["GnSqpSolver"]
 
 log = logging.getLogger(__name__)
+
+# elastic steps in a row that cannot reduce the violation before "locally infeasible"
+INFEASIBLE_STEPS = 5
 
 # Accurate, quiet settings per QP plugin (the SQP needs precise multipliers).
 QP_DEFAULTS: dict[str, dict[str, Any]] = {
@@ -198,6 +202,7 @@ class GnSqpSolver(NlpSolver):
         self._elastic_steps = 0
         mu, status, alpha, step, success = 0.0, "max_iter reached", 1.0, np.inf, False
         multipliers_only = False  # the last iteration only took the QP's multipliers
+        infeasible_steps = 0  # consecutive elastic steps that predict no less violation
         timing = {"linearize": 0.0, "qp": 0.0, "line_search": 0.0}
         t0 = time.perf_counter()
         it = 0
@@ -235,6 +240,13 @@ class GnSqpSolver(NlpSolver):
                 status = (f"QP failed ({self._qp_solver(True).stats().get('return_status')})")
                 break
             d, lg_qp, lx_qp, slack, mu = res
+            # the elastic QP predicts no less violation than now, again and again: a
+            # stationary point of the violation (the linearisations stay inconsistent)
+            stuck = slack > 0.0 and slack >= (1.0 - 1e-6) * _l1_violation(g, lbg, ubg) - 1e-12
+            infeasible_steps = infeasible_steps + 1 if stuck else 0
+            if infeasible_steps >= INFEASIBLE_STEPS:
+                status = "locally infeasible (the violation cannot be reduced further)"
+                break
             tic = time.perf_counter()
             alpha = self._line_search(w, d, p, f, g, grad, mu, slack, lbg, ubg)
             timing["line_search"] += time.perf_counter() - tic
@@ -308,3 +320,7 @@ def _check_qp_solver(name: str) -> None:
     if not cs.has_conic(name):
         raise ValueError(f"gnsqp: QP solver {name!r} is not available in this CasADi; try "
                          f"one of {sorted(n for n in QP_DEFAULTS if cs.has_conic(n))}")
+
+
+def _l1_violation(g: np.ndarray, lbg: np.ndarray, ubg: np.ndarray) -> float:
+    return float(np.sum(np.maximum(0.0, np.maximum(lbg - g, g - ubg))))
