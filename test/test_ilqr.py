@@ -426,3 +426,14 @@ def test_a_warm_receding_solve_never_claims_convergence_above_the_optimum():
         state = step(state, solver.solution["u"][:, 0], [], []).full().ravel()
         solver.shift()
     assert successes >= 1
+
+
+def test_a_start_that_fails_returns_the_guesses_it_failed_at():
+    # the solution was {} (KeyError on solution['x']) or a previous solve's
+    prb = pendulum_swing_up(5.5, n_nodes=10)
+    solver = make_solver("ilqr", prb)
+    assert solver.solve() is not None
+    prb.get_variable("u").set_initial_guess(np.nan, nodes=3)
+    assert not solver.solve()
+    assert solver.solution["x"].shape == (2, 11) and solver.solution["u"].shape == (1, 10)
+    assert np.isnan(solver.solution["u"][0, 3])

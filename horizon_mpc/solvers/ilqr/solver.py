@@ -632,8 +632,8 @@ class IlqrSolver(Solver):
         self.stats.cost = ev["cost"] if ev else math.nan
         self.stats.constraint_violation = ev["viol"] if ev else math.nan
         self.stats.extra = {"mu": self.mu, "timings": dict(self.timings)}
-        if ev is None:
-            return
+        # a failed start returns the point it failed at (the guesses), as the NLP solvers
+        # do: never an empty or a previous solve's solution
         self._split_solution(self.X.T.copy(), self.U.T.copy(), self.S)
 
     # ------------------------------------------------------------------ split iteration
