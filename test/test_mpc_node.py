@@ -472,6 +472,23 @@ def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):
                            Parameter("max_vx", value=max_vx)])
 
 
+def test_an_array_weight_set_as_ros2_param_set_delivers_it_applies(harness):
+    # through the parameter services rclpy hands arrays over as array.array: the node died
+    # on float(array('d', ...)) in its callback
+    h = harness()
+    msg = Parameter("w_base_linear_velocity", value=[10.0, 20.0, 5.0]).to_parameter_msg()
+    wire = Parameter.from_parameter_msg(msg)
+    assert type(wire.value).__name__ == "array"
+    assert h.node.set_parameters([wire])[0].successful
+    assert h.node.mpc.settings.weights.base_linear_velocity == [10.0, 20.0, 5.0]
+    short = Parameter.from_parameter_msg(
+        Parameter("w_base_linear_velocity", value=[1.0, 2.0]).to_parameter_msg())
+    res = h.node.set_parameters([short])[0]
+    assert not res.successful and "needs 3" in res.reason
+    h.publish_state()
+    h.spin_until(lambda: h.trajectories)
+
+
 def test_sigterm_exits_cleanly_with_code_0():
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     proc = subprocess.Popen([sys.executable, "-m", "horizon_mpc.nodes.mpc_node"], env=env,

@@ -101,9 +101,15 @@ class MpcParameters:
 
     def _weights_from_parameters(self, base: Weights, changed: dict | None = None) -> Weights:
         values = {n: (changed or {}).get(f"w_{n}", self._p(f"w_{n}")) for n in WEIGHT_FIELDS}
-        values = {n: list(v) if isinstance(v, (list, tuple, np.ndarray)) else float(v)
-                  for n, v in values.items()}
-        return dataclasses.replace(base, **values)
+        out = {}
+        for n, v in values.items():
+            # rclpy hands array parameters over as array.array (a live set crashed on it)
+            arr = np.atleast_1d(np.asarray(v, dtype=float))
+            size = np.size(getattr(base, n))
+            if arr.size != size:
+                raise ValueError(f"parameter w_{n}: {size} value(s) needed, got {arr.size}")
+            out[n] = arr.tolist() if np.ndim(v) else float(v)
+        return dataclasses.replace(base, **out)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """Validate and apply live changes (gait, limits, weights, idle stance, time-outs)
