@@ -283,3 +283,26 @@ def test_the_pose_reference_stays_within_the_leash_of_the_measured_pose(walking_
         assert np.hypot(*(mpc.pose_ref[:2] - q[:2])) == pytest.approx(0.1)
     finally:
         mpc.pose_ref, mpc.cmd[:], mpc.settings.pose_leash = saved[0], saved[1], saved[2]
+
+
+@pytest.mark.parametrize("jump", ["pose", "time"])
+def test_a_state_discontinuous_with_the_plan_restarts_the_controller(walking_mpc, jump):
+    """A simulator/estimator reset or an odometry glitch: the pose reference and the plan
+    stayed anchored to the old pose, and the robot walked back towards it (0.42 m/s for a
+    0.3 command after a simulator reset)."""
+    mpc = walking_mpc
+    *_, plan = _perfect_model_ticks(mpc, [(0.3, 0.0, 0.0)] * 30)
+    restarts = mpc.restarts
+    q, v = plan.q[:, 1].copy(), plan.v[:, 1].copy()
+    t = mpc.t_last + mpc.settings.dt
+    if jump == "pose":
+        q[0] += 1.0  # odometry 1 m ahead of where the plan put the robot
+    else:
+        t = 0.02  # time back to the start, as after a simulator reset
+    after = mpc.update(t, q, v, np.array([0.3, 0.0, 0.0]))
+    assert mpc.restarts == restarts + 1
+    assert after.q[0, 0] == pytest.approx(q[0])
+    np.testing.assert_allclose(mpc.pose_ref[:2], q[:2])  # re-anchored at the measured pose
+    # ordinary motion does not restart
+    plan = mpc.update(t + mpc.settings.dt, after.q[:, 1], after.v[:, 1], np.zeros(3))
+    assert mpc.restarts == restarts + 1

@@ -118,6 +118,29 @@ def test_joint_state_with_a_missing_joint_names_it():
         joints_from_joint_state(JointState(name=["a", "c"], position=[0.0, 0.0]), JOINTS)
 
 
+def test_joint_readings_far_outside_the_limits_or_absurdly_fast_are_refused_by_name():
+    # a calf at 10 rad (limits about [-2.7, -0.8]) was planned from and published as point 0
+    limits = (np.array([-1.0, -1.0, -2.7]), np.array([1.0, 1.0, -0.8]))
+    ok = JointState(name=JOINTS, position=[1.4, 0.0, -1.5], velocity=[0.0, 0.0, 0.0])
+    qj, _, _ = joints_from_joint_state(ok, JOINTS, limits)  # 0.4 past a limit: a reading
+    assert qj[0] == 1.4
+    far = JointState(name=JOINTS, position=[0.0, 0.0, 10.0])
+    with pytest.raises(ValueError, match=r"outside the joint limits: c=10"):
+        joints_from_joint_state(far, JOINTS, limits)
+    fast = JointState(name=JOINTS, position=[0.0, 0.0, -1.5], velocity=[0.0, 5e3, 0.0])
+    with pytest.raises(ValueError, match=r"velocities beyond 1000: b=5000"):
+        joints_from_joint_state(fast, JOINTS, limits)
+
+
+def test_odometry_of_absurd_magnitude_is_refused_and_an_upside_down_base_noted():
+    msg = odometry_to_msg(time_from_ns(0), [0, 0, 1e9], [0, 0, 0, 1], [0, 0, 0], [0, 0, 0])
+    with pytest.raises(ValueError, match="position .* beyond the plausible"):
+        base_from_odometry(msg)
+    flipped = odometry_to_msg(time_from_ns(0), [0, 0, 0.3], [1, 0, 0, 0], [0, 0, 0], [0, 0, 0])
+    _, _, _, _, notes = base_from_odometry(flipped)
+    assert any("upside down" in n for n in notes)
+
+
 @given(pose=st.lists(floats, min_size=7, max_size=7), twist6=st.lists(floats, min_size=6,
                                                                         max_size=6))
 def test_odometry_gives_a_unit_quaternion_or_is_rejected(pose, twist6):
@@ -470,6 +493,29 @@ def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):
     assert not h.node.set_parameters([Parameter("robot", value="solo12")])[0].successful
     h.node.set_parameters([Parameter("gait", value="trot"), Parameter("w_posture", value=1.0),
                            Parameter("max_vx", value=max_vx)])
+
+
+def test_a_state_older_than_the_last_one_planned_from_is_refused(harness):
+    h = harness()
+    h.publish_state()
+    h.spin_until(lambda: h.trajectories)
+    n, skips = len(h.trajectories), h.node.stale_skips
+    h.publish_state(age=0.06)  # 60 ms before the one just used (clock not gone back)
+    h.spin_for(0.3)
+    assert len(h.trajectories) == n and h.node.stale_skips == skips + 1
+    h.publish_state()
+    h.spin_until(lambda: len(h.trajectories) > n)
+
+
+def test_states_without_ticks_get_explained(harness, monkeypatch):
+    h = harness(trigger="timer", use_sim_time=True)  # and nothing publishes /clock
+    said: list[str] = []
+    monkeypatch.setattr(h.node, "_warn", lambda kind, text: said.append(kind))
+    h.node._check_progress()
+    h.publish_state()
+    h.spin_until(lambda: h.node._states_in >= 2)
+    h.node._check_progress()
+    assert said == ["no_clock"] and not h.trajectories
 
 
 def test_an_array_weight_set_as_ros2_param_set_delivers_it_applies(harness):

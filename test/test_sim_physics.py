@@ -271,3 +271,23 @@ def test_render_and_gif(go2, tmp_path):
     assert frames[0].std() > 5  # not a blank image
     path = write_gif(tmp_path / "go2.gif", frames, fps=10)
     assert path.stat().st_size > 0
+
+
+def test_an_absurd_push_is_refused(go2):
+    with pytest.raises(ValueError, match="beyond the plausible"):
+        go2.push("base", [1e12, 0.0, 0.0])
+
+
+def test_reset_recovers_a_world_whose_state_went_non_finite(go2):
+    # pybullet keeps the NaNs in its contact caches: teleporting alone left a robot that
+    # fell through the floor (z -45 m two seconds after a reset)
+    q = go2.state().q.copy()
+    v = np.zeros(go2.model.nv)
+    v[6:] = 1e200
+    go2.set_state(q, v)
+    go2.step(5)
+    assert not np.all(np.isfinite(go2.state().q))
+    go2.reset(reset_time=False)
+    go2.step(1000)
+    st = go2.state()
+    assert np.all(np.isfinite(st.q)) and st.q[2] == pytest.approx(go2.q_start[2], abs=0.03)

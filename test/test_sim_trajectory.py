@@ -174,3 +174,13 @@ def test_future_first_point_starts_from_the_current_reference():
     ref.set_command(command(times=(1.0, 2.0), velocities=False).validate(JOINTS), now=0.0)
     np.testing.assert_allclose(ref.reference(0.0)[0], 0.0)
     np.testing.assert_allclose(ref.reference(0.5)[0], [0.0, 0.5, 1.0])  # halfway to row 0
+
+
+@pytest.mark.parametrize("field, value", [("positions", 1e308), ("velocities", -1e300),
+                                          ("efforts", 1e12)])
+def test_finite_but_absurd_values_are_refused(field, value):
+    # 1e308 positions overflowed in the interpolation: the simulated state went NaN for good
+    cmd = command()
+    getattr(cmd, field)[1, 2] = value
+    with pytest.raises(ValueError, match=rf"{field} beyond the plausible .*\(1, 2\)"):
+        cmd.validate(JOINTS)

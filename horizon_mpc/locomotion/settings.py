@@ -70,6 +70,10 @@ class MpcSettings:
     pose_leash: float = 0.4
     yaw_leash: float = 0.3
     stand_when_idle: bool = True
+    # m (and rad): a measured base pose this far from the plan's (beyond 2 m/s and 3 rad/s
+    # of motion since the last tick) is a reset or a glitch of the state estimate, not
+    # motion: the controller restarts from it rather than chase the old pose
+    pose_jump: float = 0.3
     rho_init: float = 100.0
     # inequality rows (friction cones, torque and joint limits) in the ILQR: 'barrier' (a
     # relaxed log barrier, smooth: one iteration per tick walks every command of the lockstep

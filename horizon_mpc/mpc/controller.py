@@ -90,10 +90,8 @@ class WalkingMpc:
     def __init__(self, cfg: RobotConfig | str, model: RobotModel | None = None,
                  settings: MpcSettings | None = None, iterations: int | None = None):
         self.cfg = load_robot_config(cfg) if isinstance(cfg, str) else cfg
-        if model is None:
-            model = (RobotModel.from_urdf(self.cfg.urdf_path) if self.cfg.urdf_path
-                     else RobotModel.from_example(self.cfg.robot))
-        self.model = model
+        self.model = model if model is not None else self.config_model(self.cfg)
+        model = self.model
         self.settings = settings or MpcSettings.from_dict(self.cfg.section("mpc"))
         if iterations is None:
             iterations = self.settings.iterations
@@ -136,6 +134,13 @@ class WalkingMpc:
         # the prepared step is for
         self._prepared_for: float | None = None
         self.prepare_misses = 0  # ticks too far from the prepared time: whole ticks run
+        self.restarts = 0  # ticks that restarted from a state discontinuous with the plan
+
+    @staticmethod
+    def config_model(cfg: RobotConfig) -> RobotModel:
+        """The robot config's own model: its ``urdf_path``, else its example robot."""
+        return (RobotModel.from_urdf(cfg.urdf_path) if cfg.urdf_path
+                else RobotModel.from_example(cfg.robot))
 
     # ------------------------------------------------------------------ set-up
     def start(self, q: np.ndarray, v: np.ndarray, t: float = 0.0,
@@ -193,6 +198,13 @@ class WalkingMpc:
         the preparation); otherwise it is the whole tick.
         """
         if self.t_last is None:
+            return self.start(q, v, t)
+        jump = self._discontinuity(t, q)
+        if jump is not None:
+            # a simulator or estimator reset, an odometry glitch: a plan (and the pose
+            # reference) anchored to the old pose would chase it
+            self.restarts += 1
+            log.warning("%s: restarting from the measured state", jump)
             return self.start(q, v, t)
         if self._prepared_for is not None:
             plan = self._feedback(t, q, v)
@@ -275,6 +287,25 @@ class WalkingMpc:
         plan = self._plan(t_plan)
         plan.stats["iterations"] = self.iterations
         return plan
+
+    def _discontinuity(self, t: float, q: np.ndarray) -> str | None:
+        """What makes the state at ``t`` no continuation of the last tick's (time back by
+        more than 0.1 s, a base pose off the plan's by more than ``settings.pose_jump`` plus
+        what 2 m/s and 3 rad/s explain), or None."""
+        if t < self.t_last - 0.1:
+            return f"time went back {self.t_last - t:.3f} s"
+        q = np.asarray(q, dtype=float)
+        if not np.all(np.isfinite(q[:7])):
+            return None  # the tick's failure handling applies
+        expected = self.wp.q.initial_guess[:, 0]
+        dt = abs(t - self.t_last)
+        dist = math.hypot(q[0] - expected[0], q[1] - expected[1])
+        dyaw = abs(_wrap(_yaw(self._clean_q(q)) - _yaw(expected)))
+        jump = self.settings.pose_jump
+        if dist > jump + 2.0 * dt or dyaw > jump + 3.0 * dt:
+            return (f"the measured base pose is {dist:.3f} m / {dyaw:.3f} rad off the plan's "
+                    f"(pose_jump {jump:g})")
+        return None
 
     def _shift(self, dt_tick: float, q: np.ndarray) -> None:
         """Move the warm start by ``dt_tick`` (s): whole nodes, then the fraction; past the

@@ -20,6 +20,7 @@ from sensor_msgs.msg import JointState
 
 __all__ = [
     "ABSURD_COMMAND",
+    "JOINT_LIMIT_MARGIN",
     "QUATERNION_TOLERANCE",
     "base_from_odometry",
     "command_from_twist",
@@ -30,6 +31,12 @@ __all__ = [
 ABSURD_COMMAND = 10.0
 #: A quaternion whose norm is further than this from 1 is normalised with a note.
 QUATERNION_TOLERANCE = 1e-3
+#: rad (or m): a joint further than this outside its URDF limits is a wrong reading.
+JOINT_LIMIT_MARGIN = 0.5
+#: rad/s (or m/s): a joint velocity beyond this is a wrong reading.
+ABSURD_JOINT_VELOCITY = 1e3
+#: m, m/s, rad/s: odometry position, linear or angular velocity beyond these is garbage.
+ABSURD_POSITION, ABSURD_LINEAR, ABSURD_ANGULAR = 1e5, 100.0, 100.0
 
 
 def command_from_twist(
@@ -94,16 +101,20 @@ def _name_match(names: tuple[str, ...], joint_names: tuple[str, ...]) -> tuple[
 
 
 def joints_from_joint_state(
-    msg: JointState, joint_names: Sequence[str]
+    msg: JointState, joint_names: Sequence[str],
+    limits: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Joint positions and velocities (each (nj,), order of ``joint_names``), matched by name.
 
     Repaired with a note: extra joints (ignored), no velocities (zeros), non-finite
-    velocities (zeros). Reordered joints are simply matched by name.
+    velocities (zeros). Reordered joints are simply matched by name. ``limits``: the
+    joints' (lower, upper) position limits (infinite for none).
 
     Raises:
         ValueError: a missing or duplicated joint, a position/velocity array whose length
-            differs from ``msg.name``, or a non-finite position.
+            differs from ``msg.name``, a non-finite position, a position more than
+            :data:`JOINT_LIMIT_MARGIN` outside its limits, or a velocity beyond
+            :data:`ABSURD_JOINT_VELOCITY`.
     """
     names = tuple(msg.name)
     idx, name_notes = _name_match(names, tuple(joint_names))
@@ -118,6 +129,14 @@ def joints_from_joint_state(
     if not np.all(np.isfinite(qj)):
         bad = [n for n, x in zip(joint_names, qj, strict=True) if not math.isfinite(x)]
         raise ValueError(f"JointState has non-finite positions for {bad}")
+    if limits is not None:
+        lo, hi = limits
+        out = (qj < lo - JOINT_LIMIT_MARGIN) | (qj > hi + JOINT_LIMIT_MARGIN)
+        if out.any():
+            bad = [f"{n}={x:g} (limits [{a:g}, {b:g}])" for n, x, a, b, o in
+                   zip(joint_names, qj, lo, hi, out, strict=True) if o]
+            raise ValueError(f"JointState positions far outside the joint limits: "
+                             f"{', '.join(bad)}")
     if not vel.size:
         notes.append("JointState has no velocities; using zeros")
         return qj, np.zeros(len(idx)), notes
@@ -126,6 +145,11 @@ def joints_from_joint_state(
         bad = [n for n, x in zip(joint_names, vj, strict=True) if not math.isfinite(x)]
         notes.append(f"JointState has non-finite velocities for {bad}; using zeros for those")
         vj = np.where(np.isfinite(vj), vj, 0.0)
+    if np.any(np.abs(vj) > ABSURD_JOINT_VELOCITY):
+        bad = [f"{n}={x:g}" for n, x in zip(joint_names, vj, strict=True)
+               if abs(x) > ABSURD_JOINT_VELOCITY]
+        raise ValueError(f"JointState velocities beyond {ABSURD_JOINT_VELOCITY:g}: "
+                         f"{', '.join(bad)}")
     return qj, vj, notes
 
 
@@ -149,6 +173,11 @@ def base_from_odometry(
         if not all(map(math.isfinite, values)):
             raise ValueError(f"Odometry {what} is not finite: {[float(x) for x in values]}")
     pos, quat, v_lin, v_ang = (np.array(values, dtype=float) for _, values in parts)
+    for what, x, bound in (("position", pos, ABSURD_POSITION),
+                           ("linear twist", v_lin, ABSURD_LINEAR),
+                           ("angular twist", v_ang, ABSURD_ANGULAR)):
+        if np.max(np.abs(x)) > bound:
+            raise ValueError(f"Odometry {what} {x.tolist()} is beyond the plausible {bound:g}")
     scale = float(np.max(np.abs(quat)))  # normalise in two steps: |q|^2 may overflow
     if scale < 1e-6:
         raise ValueError(f"Odometry orientation is a zero quaternion {quat.tolist()}")
@@ -158,4 +187,8 @@ def base_from_odometry(
     notes = []
     if abs(norm - 1.0) > QUATERNION_TOLERANCE:
         notes.append(f"Odometry orientation has norm {norm:.6g}; normalised")
+    x, y = unit[0], unit[1]
+    if 1.0 - 2.0 * (x * x + y * y) < 0.0:  # the base z-axis points down
+        notes.append("Odometry orientation has the base upside down: the walking plan "
+                     "cannot recover from that")
     return pos, unit, v_lin, v_ang, notes

@@ -25,6 +25,7 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry, Path
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -54,6 +55,7 @@ from horizon_mpc.nodes.spin import spin_until_signal
 __all__ = ["MpcNode", "main", "robot_model"]
 
 _WARN_PERIOD = 2.0  # s (wall) between two warnings of the same kind
+_WATCH_PERIOD = 2.0  # s (wall): states arriving this long without a tick get explained
 _RECENT_STATES = 8  # joint_states / odom messages kept to pair them by stamp
 class MpcNode(MpcParameters, Node):
     """The MPC node. Construct after ``rclpy.init()``; spin it with any executor.
@@ -100,19 +102,25 @@ class MpcNode(MpcParameters, Node):
         if mpc is None:
             model = robot_model(cfg, str(self._p("urdf_path")),
                                 str(self._p("robot_description")))
+            model = model if model is not None else WalkingMpc.config_model(cfg)
+            _check_joints(model)  # before the build (tens of seconds)
             mpc = WalkingMpc(cfg, model, settings=settings, iterations=self._p("iterations"))
         else:
             mpc.set_gait(g.name, g.step_duration, g.step_height, g.duty_factor)
             mpc.set_stand_when_idle(settings.stand_when_idle)
             mpc.wp.set_weights(settings.weights)
         self.mpc = mpc
+        source = ("robot_description" if self._p("robot_description") else
+                  str(self._p("urdf_path")) or "example-robot-data")
         self.get_logger().info(
-            f"built the {cfg.name} walking MPC in {time.perf_counter() - t:.2f} s "
+            f"built the {cfg.name} walking MPC (model from {source}) in "
+            f"{time.perf_counter() - t:.2f} s "
             f"({settings.n_nodes} nodes x {settings.dt:g} s, {mpc.iterations} "
             f"iteration(s)/tick, gait {g.name})")
         self.joint_names = list(mpc.model.joint_names)
-        if mpc.model.nq != 7 + len(self.joint_names):
-            raise ValueError("mpc_node needs one q entry per joint (no continuous joints)")
+        _check_joints(mpc.model)
+        # readings far outside these are refused (a wrong joint offset, a garbled message)
+        self._joint_limits = (mpc.model.q_lower[7:].copy(), mpc.model.q_upper[7:].copy())
         self.period = 1.0 / self._p("control_rate")
         self.state_timeout = self._p("state_timeout")
         self.cmd_timeout = self._p("cmd_timeout")
@@ -165,6 +173,12 @@ class MpcNode(MpcParameters, Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if self.trigger == "timer":
             self._timer = self.create_timer(self.period, self.tick)
+        # on the wall clock: says why states arrive and no tick comes (a node clock that
+        # stands still, stamps that never pair); silent otherwise
+        self._states_in = 0  # accepted joint_states and odom messages
+        self._watch = (0, 0, self.get_clock().now().nanoseconds)
+        self.create_timer(_WATCH_PERIOD, self._check_progress,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"waiting for joint_states and odom (trigger: {self.trigger})")
 
     # ------------------------------------------------------------------ helpers
@@ -182,6 +196,24 @@ class MpcNode(MpcParameters, Node):
         self._last_warn[kind] = wall
         self.get_logger().warning(text + (f" ({n} similar warnings suppressed)" if n else ""))
 
+    def _check_progress(self) -> None:
+        """Explain (throttled) why states keep arriving while no tick happens."""
+        ticks, clock_ns = self.ticks + self.stale_skips, self.get_clock().now().nanoseconds
+        prev_states, prev_ticks, prev_clock = self._watch
+        self._watch = (self._states_in, ticks, clock_ns)
+        if self._states_in == prev_states or ticks > prev_ticks:
+            return
+        if self.trigger == "timer" and clock_ns == prev_clock:
+            self._warn("no_clock", "states arrive but the node's clock stands still: "
+                       "use_sim_time is true and nothing publishes /clock; on a robot run "
+                       "with -p use_sim_time:=false")
+        elif self.trigger == "state" and self._joints is not None and self._base is not None \
+                and self._joints[0] != self._base[0]:
+            self._warn("unpaired", "trigger 'state' ticks when joint_states and odom of one "
+                       "stamp have arrived, and theirs never match (the last ones "
+                       f"{(self._joints[0] - self._base[0]) / 1e6:+.1f} ms apart): with "
+                       "separate drivers use trigger:=timer")
+
     @property
     def command(self) -> np.ndarray:
         """The command used now: the last cmd_vel, or zero once it is older than cmd_timeout."""
@@ -197,7 +229,7 @@ class MpcNode(MpcParameters, Node):
     # ------------------------------------------------------------------ inputs
     def _on_joint_state(self, msg: JointState) -> None:
         try:
-            qj, vj, notes = joints_from_joint_state(msg, self.joint_names)
+            qj, vj, notes = joints_from_joint_state(msg, self.joint_names, self._joint_limits)
         except ValueError as exc:
             self.rejected["joint_states"] += 1
             self._warn("joint_states", f"rejected joint_states: {exc}")
@@ -205,6 +237,7 @@ class MpcNode(MpcParameters, Node):
         for note in notes:
             self._warn(_note_kind("joint_states", note), note)
         self._joints_recent.append((time_to_ns(msg.header.stamp), qj, vj))
+        self._states_in += 1
         self._maybe_tick_on_state()
 
     def _on_odom(self, msg: Odometry) -> None:
@@ -217,6 +250,7 @@ class MpcNode(MpcParameters, Node):
         for note in notes:
             self._warn(_note_kind("odom", note), note)
         self._base_recent.append((time_to_ns(msg.header.stamp), pos, quat, lin, ang))
+        self._states_in += 1
         self._maybe_tick_on_state()
 
     def _on_cmd_vel(self, msg: Twist) -> None:
@@ -275,6 +309,13 @@ class MpcNode(MpcParameters, Node):
             return False
         t = stamp_ns / NS_PER_S
         now_ns = self.get_clock().now().nanoseconds
+        if self._last_tick_stamp is not None and stamp_ns < self._last_tick_stamp \
+                and now_ns >= self._last_tick_stamp:
+            # out of order (the node's clock did not go back, as at a simulator reset)
+            self.stale_skips += 1
+            self._warn("order", f"a state stamped {(self._last_tick_stamp - stamp_ns) / 1e6:.1f}"
+                       " ms before the one the last plan was made from: not planning from it")
+            return False
         self.last_state_age = now_ns / NS_PER_S - t
         if abs(self.last_state_age) > self.state_timeout:
             self.stale_skips += 1
@@ -446,6 +487,11 @@ def with_sim_time_default(argv: Sequence[str]) -> list[str]:
             if flag == "--params-file"):
         return argv
     return [*argv, "--ros-args", "-p", "use_sim_time:=true"]
+
+
+def _check_joints(model: RobotModel) -> None:
+    if model.nq != 7 + len(model.joint_names):
+        raise ValueError("mpc_node needs one q entry per joint (no continuous joints)")
 
 
 def _sets_use_sim_time(params_file: str) -> bool:

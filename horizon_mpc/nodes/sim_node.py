@@ -141,7 +141,8 @@ class SimNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
-        declare = functools.partial(declare_parameter, self)
+        # all read at start-up: read-only, so a live set is refused, not accepted and ignored
+        declare = functools.partial(declare_parameter, self, read_only=True)
 
         declare("robot", "go2", "robot config name (config/<robot>.yaml)")
         declare("config", "", "path of a robot config YAML (overrides 'robot')")

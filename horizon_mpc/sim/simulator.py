@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,6 +86,10 @@ def _gains(value: float | Sequence[float] | np.ndarray, n: int, name: str) -> np
     return arr
 
 
+#: N (N m): a push beyond this is garbage (it would blow the physics up)
+PLAUSIBLE_WRENCH = 1e6
+
+
 class Simulator:
     """A legged robot in pybullet, joint-trajectory controlled, in Pinocchio conventions."""
 
@@ -145,15 +150,9 @@ class Simulator:
 
         self.client = p.connect(p.DIRECT)
         self._closed = False
-        g = float(np.linalg.norm(self.model.gravity.linear))
-        p.setGravity(0.0, 0.0, -g, physicsClientId=self.client)
-        p.setPhysicsEngineParameter(fixedTimeStep=self.dt, physicsClientId=self.client)
-        self.ground = self._create_ground()
         self.urdf_path = Path(cfg.urdf_path) if cfg.urdf_path else _example_urdf(cfg)
-        self.robot: LoadedRobot = load_robot(
-            self.client, self.urdf_path, [Path(d) for d in (search_dirs or [])], self.friction
-        )
-        self.body = self.robot.body
+        self._search_dirs = [Path(d) for d in (search_dirs or [])]
+        self._build_world()
         # pybullet's base pose is the root link's inertial frame: T_com->base, applied on reads
         self._com_to_base = tuple(
             tuple(float(x) for x in a)
@@ -181,6 +180,16 @@ class Simulator:
         self.reset()
 
     # ------------------------------------------------------------------ setup helpers
+    def _build_world(self) -> None:
+        """Gravity, time step, ground and robot in the (empty) pybullet world."""
+        g = float(np.linalg.norm(self.model.gravity.linear))
+        p.setGravity(0.0, 0.0, -g, physicsClientId=self.client)
+        p.setPhysicsEngineParameter(fixedTimeStep=self.dt, physicsClientId=self.client)
+        self.ground = self._create_ground()
+        self.robot: LoadedRobot = load_robot(self.client, self.urdf_path, self._search_dirs,
+                                             self.friction)
+        self.body = self.robot.body
+
     def _check_model(self) -> None:
         for i in range(2, self.model.njoints):
             j = self.model.joints[i]
@@ -237,14 +246,25 @@ class Simulator:
         """Back to the standing start: nominal posture on the ground, at rest, holding it.
 
         Drops the trajectory and any push. ``reset_time=False`` keeps the clock running (the
-        ROS node does, so that ``/clock`` never jumps back).
+        ROS node does, so that ``/clock`` never jumps back). A world whose state is no
+        longer finite (pybullet keeps NaNs in its contact caches) is rebuilt first.
         """
+        if self._steps and not self._state_finite():
+            p.resetSimulation(physicsClientId=self.client)
+            self._build_world()
         self.set_state(self.q_start)
         self.reference.hold(self._joint_angles(self.q_start), self.tau_standing)
         self._tau[:] = 0.0
         self._pushes.clear()
         if reset_time:
             self._steps = 0
+
+    def _state_finite(self) -> bool:
+        pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+        lin, ang = p.getBaseVelocity(self.body, physicsClientId=self.client)
+        states = p.getJointStates(self.body, self._pb_joints, physicsClientId=self.client)
+        values = [*pos, *orn, *lin, *ang, *(x for s in states for x in s[:2])]
+        return all(map(math.isfinite, values))
 
     def set_state(self, q: np.ndarray, v: np.ndarray | None = None) -> None:
         """Teleport the robot to ``q`` (nq,) with velocity ``v`` (nv,) (Pinocchio conventions)."""
@@ -308,6 +328,9 @@ class Simulator:
             raise ValueError(f"force and torque must have 3 components, got {f.shape}, {tq.shape}")
         if not (np.all(np.isfinite(f)) and np.all(np.isfinite(tq))):
             raise ValueError(f"force/torque contains NaN/Inf: {f}, {tq}")
+        if max(np.max(np.abs(f)), np.max(np.abs(tq))) > PLAUSIBLE_WRENCH:
+            raise ValueError(f"force/torque beyond the plausible {PLAUSIBLE_WRENCH:g} N (N m): "
+                             f"{f}, {tq}")
         if not (np.isfinite(duration) and duration > 0):
             raise ValueError(f"push duration must be positive, got {duration}")
         end = self._steps + max(1, round(duration / self.dt))

@@ -26,6 +26,11 @@ import numpy as np
 __all__ = ["JointTrajectoryCommand", "ReferenceGenerator"]
 
 
+#: magnitudes no joint reference reaches (rad or m, rad/s or m/s, N m or N): beyond them a
+#: command is garbage, and its interpolation would overflow into the physics (NaN state)
+PLAUSIBLE = {"positions": 1e4, "velocities": 1e5, "efforts": 1e7}
+
+
 def _finite_array(name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
@@ -36,6 +41,11 @@ def _finite_array(name: str, value: object, shape: tuple[int, ...]) -> np.ndarra
     if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise ValueError(f"{name} contains NaN/Inf (first at index {tuple(int(i) for i in bad)})")
+    bound = PLAUSIBLE.get(name)
+    if bound is not None and arr.size and np.max(np.abs(arr)) > bound:
+        bad = np.unravel_index(int(np.argmax(np.abs(arr))), arr.shape)
+        raise ValueError(f"{name} beyond the plausible {bound:g} (at index "
+                         f"{tuple(int(i) for i in bad)}: {arr[bad]:g})")
     return arr
 
 
