@@ -18,12 +18,14 @@ Set ``HORIZON_MPC_NO_CODEGEN=1`` to get ``fn`` back unchanged (debugging, or no 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import logging
 import os
 import platform
 import re
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -231,16 +233,32 @@ def _build(fn: ca.Function, lib: Path) -> None:
         start = time.perf_counter()
         tmp_lib = work / lib.name
         cmd = [CC, *opt, *_FLAGS, str(c_file), "-o", str(tmp_lib), "-lm"]
-        res = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        if res.returncode != 0:
+        returncode, stderr = _run_compiler(cmd)
+        if returncode != 0:
             raise RuntimeError(
-                f"compiling {fn.name()} failed ({' '.join(cmd)}):\n{res.stderr[-2000:]}"
+                f"compiling {fn.name()} failed ({' '.join(cmd)}):\n{stderr[-2000:]}"
             )
         os.replace(tmp_lib, lib)  # atomic within one file system
         STATS.compiled += 1
         _log.info("compiled %s in %.1f s -> %s", fn.name(), time.perf_counter() - start, lib)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+def _run_compiler(cmd: list[str]) -> tuple[int, str]:
+    """Run the compiler in a process group of its own; if anything interrupts the wait
+    (a signal handler raising, KeyboardInterrupt), the whole group is killed: killing the
+    driver alone left its cc1 compiling for tens of seconds."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        _, stderr = proc.communicate()
+    except BaseException:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        raise
+    return proc.returncode, stderr
 
 
 class BufferedFunction:

@@ -17,6 +17,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path as FilePath
 
 import numpy as np
 import pytest
@@ -545,6 +546,44 @@ def test_sigterm_exits_cleanly_with_code_0():
                 break
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def _cmdlines_naming(text: str) -> list[str]:
+    found = []
+    for proc_dir in FilePath("/proc").glob("[0-9]*"):
+        try:
+            cmd = (proc_dir / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:
+            continue
+        if text in cmd:
+            found.append(cmd)
+    return found
+
+
+def test_a_signal_while_the_problem_compiles_stops_the_compiler_and_exits_0(tmp_path):
+    # a SIGTERM to the process waited for the whole build (~15 s; a launcher's kill
+    # timeout escalates to SIGKILL) and left the compiler running
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path),
+           "HORIZON_MPC_CACHE_DIR": str(tmp_path)}  # empty: everything compiles
+    proc = subprocess.Popen([sys.executable, "-m", "horizon_mpc.nodes.mpc_node", "--ros-args",
+                             "-p", "use_sim_time:=false"], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        end = time.monotonic() + 120
+        while not any(tmp_path.glob(".build_*")):
+            assert proc.poll() is None and time.monotonic() < end
+            time.sleep(0.05)
+        time.sleep(0.3)
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=15) == 0
+        assert time.monotonic() - sent < 5
+        assert "Traceback" not in proc.stdout.read()
+        time.sleep(0.2)
+        assert not _cmdlines_naming(str(tmp_path)) and not any(tmp_path.glob(".build_*"))
     finally:
         if proc.poll() is None:
             proc.kill()
