@@ -23,6 +23,7 @@ DEPS_HASH := $(shell $(PYTHON) -c 'import hashlib, sys; h = hashlib.sha256(); \
 DEPS_STAMP := $(VENV)/.horizon_mpc-deps-$(DEPS_HASH)
 DATA_STAMP := $(VENV)/.horizon_mpc-data.stamp
 DATA_FILES := package.xml resource/horizon_mpc $(wildcard scripts/*) $(wildcard config/*.yaml) \
+	$(wildcard config/motions/*.yaml config/commands/*.yaml) \
 	$(wildcard launch/*.py launch/*.xml launch/*.yaml)
 
 # Comparison peer for the benchmarks: Crocoddyl crashes with pin 4.1, so it gets its own venv
