@@ -266,6 +266,19 @@ def test_a_state_is_answered_by_a_well_formed_trajectory(harness):
     assert h.paths[-1].header.frame_id == "odom"
 
 
+def test_the_predicted_path_is_in_the_frame_of_the_odometry_pose(harness):
+    # it was stamped 'odom' whatever frame the state came in
+    h = harness()
+    stamp = time_from_ns(h.probe.get_clock().now().nanoseconds)
+    q = h.q
+    h.pub_js.publish(joint_state_to_msg(stamp, h.node.joint_names, q[7:], np.zeros(len(q) - 7)))
+    h.pub_odom.publish(odometry_to_msg(stamp, q[:3], q[3:7], np.zeros(3), np.zeros(3),
+                                       frame_id="map"))
+    h.spin_until(lambda: h.paths)
+    assert h.paths[-1].header.frame_id == "map"
+    assert {p.header.frame_id for p in h.paths[-1].poses} == {"map"}
+
+
 def test_efforts_are_the_inverse_dynamics_of_the_plan(harness):
     h = harness()
     h.publish_state()

@@ -138,6 +138,7 @@ class MpcNode(MpcParameters, Node):
         self._last_diag: tuple[int, bytes] | None = None  # (node clock ns, level) last sent
         self._solve_time_max = 0.0  # s, over the ticks since the last diagnostics
         self._path = Path()  # reused: its poses are overwritten in place (see path_msg)
+        self._world_frame = "odom"  # the odometry pose's frame: the predicted path's
         self._trajectory = JointTrajectory()  # reused likewise (see trajectory_msg)
         self._diag = DiagnosticsMessage(f"{self.get_name()}: walking MPC", mpc.cfg.name)
 
@@ -250,6 +251,7 @@ class MpcNode(MpcParameters, Node):
         for note in notes:
             self._warn(_note_kind("odom", note), note)
         self._base_recent.append((time_to_ns(msg.header.stamp), pos, quat, lin, ang))
+        self._world_frame = msg.header.frame_id or "odom"
         self._states_in += 1
         self._maybe_tick_on_state()
 
@@ -392,9 +394,10 @@ class MpcNode(MpcParameters, Node):
                                stamp_ns)
 
     def path_msg(self, plan: Plan, stamp_ns: int) -> Path:
-        """The planned base poses of every node, frame ``odom``: the node's one Path message,
-        refilled in place (:func:`fill_path`), so copy it to keep it past the next call."""
-        return fill_path(self._path, plan, stamp_ns)
+        """The planned base poses of every node, in the frame of the odometry's pose
+        (``odom`` until one arrives): the node's one Path message, refilled in place
+        (:func:`fill_path`), so copy it to keep it past the next call."""
+        return fill_path(self._path, plan, stamp_ns, self._world_frame)
 
     def gait_phase(self, t: float) -> float:
         """Phase in [0, 1) of the gait cycle at ``t`` (NaN while standing)."""

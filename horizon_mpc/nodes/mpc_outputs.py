@@ -61,8 +61,10 @@ def fill_path(msg: Path, plan: Plan, stamp_ns: int, frame_id: str = "odom") -> P
     (building 41 poses anew costs ~0.4 ms a tick)."""
     n = plan.q.shape[1]
     if len(msg.poses) != n:
-        msg.header.frame_id = frame_id
         msg.poses = [PoseStamped() for _ in range(n)]
+    if msg.header.frame_id != frame_id or (msg.poses and msg.poses[0].header.frame_id
+                                           != frame_id):
+        msg.header.frame_id = frame_id
         for ps in msg.poses:
             ps.header.frame_id = frame_id
     set_stamp(msg.header.stamp, stamp_ns)
