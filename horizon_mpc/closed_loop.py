@@ -29,6 +29,7 @@ import numpy as np
 import rclpy
 import yaml
 from geometry_msgs.msg import Twist
+from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -48,6 +49,7 @@ from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen, render_replay
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.nodes.mpc_node import MpcNode
+from horizon_mpc.nodes.mpc_parameters import parameter_names
 from horizon_mpc.nodes.mpc_process import (
     MpcMonitor,
     MpcProcess,
@@ -376,7 +378,9 @@ def _twist(cmd: np.ndarray) -> Twist:
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI: run the closed loop and write summary.json, plots and a GIF into ``--out``.
 
-    Exit code 0, or 1 when the MPC process (real-time mode) failed (the error says why).
+    Exit code 0; 1 when the robot fell or the MPC process (real-time mode) failed (the log
+    says which); 2 for arguments it cannot run with (profile, robot, ``-p``, durations),
+    in one error line before anything starts.
     """
     from horizon_mpc.closed_loop_report import summarise, write_report
 
@@ -408,21 +412,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     # DDS discovery on this host only, for this process and the MPC process alike
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     profile = args.profile or DEFAULT_PROFILE  # an empty --profile (launch default) = default
-    segments = load_profile(profile)
-    pushes = load_pushes(profile)
+    try:
+        segments, pushes, mpc_parameters = _checked_arguments(args, profile)
+    except (ValueError, FileNotFoundError, KeyError) as exc:
+        message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        log.error("cannot run: %s", message)
+        return 2
     log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, profile)
-    mpc_parameters = {}
-    for item in args.mpc_param:
-        name, sep, value = item.partition("=")
-        if not sep or not name:
-            ap.error(f"--mpc-param needs NAME=VALUE, got {item!r}")
-        mpc_parameters[name] = yaml.safe_load(value)
     try:
         rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
                   pushes=pushes, mpc_parameters=mpc_parameters)
     except MpcProcessError as exc:
         log.error("%s", exc)
         return 1
+    except ParameterException as exc:  # a -p value of the wrong type or out of its range
+        log.error("cannot run: %s", exc)
+        return 2
     summary = summarise(rec, segments, mode=args.mode, robot=args.robot)
     written = write_report(rec, summary, args.out)
     age = summary["plan_age_ms"]
@@ -433,7 +438,51 @@ def main(argv: Sequence[str] | None = None) -> int:
              age["median"], age["p95"], summary["falls"]["count"])
     for path in written:
         log.info("wrote %s", path)
+    if summary["falls"]["count"]:
+        log.error("the robot fell (first at t = %.2f s)", summary["falls"]["times"][0])
+        return 1
     return 0
+
+
+# set by this launcher (the simulator is built for --robot, lockstep needs trigger 'state')
+_HARNESS_PARAMETERS = ("robot", "config", "urdf_path", "robot_description", "trigger",
+                       "use_sim_time")
+
+
+def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, list, dict]:
+    """Profile segments and pushes, and the ``-p`` parameters, all checked before a run.
+
+    Raises:
+        ValueError / FileNotFoundError / KeyError: what cannot run, in one message.
+    """
+    load_robot_config(args.robot)  # an unknown robot, named with the known ones
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ValueError(f"--duration must be a finite number of seconds > 0, got "
+                         f"{args.duration}")
+    if args.iterations is not None and args.iterations < 1:
+        raise ValueError(f"--iterations must be >= 1, got {args.iterations}")
+    segments = load_profile(profile)
+    pushes = load_pushes(profile)
+    end = args.duration if args.duration is not None else sum(s.duration for s in segments)
+    late = [p.time for p in pushes if p.time >= end]
+    if late:
+        raise ValueError(f"push time(s) {late} s at or after the end of the run ({end:g} s)")
+    known = parameter_names()
+    params = {}
+    for item in args.mpc_param:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise ValueError(f"--mpc-param needs NAME=VALUE, got {item!r}")
+        if name in _HARNESS_PARAMETERS:
+            raise ValueError(f"-p {name}: set by the closed loop itself (--robot, the mode)")
+        if name not in known:
+            raise ValueError(f"-p {name}: mpc_node has no such parameter; it has "
+                             f"{', '.join(n for n in known if n not in _HARNESS_PARAMETERS)}")
+        try:
+            params[name] = yaml.safe_load(value)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"-p {name}: {value!r} is not a YAML value ({exc})") from None
+    return segments, pushes, params
 
 
 if __name__ == "__main__":

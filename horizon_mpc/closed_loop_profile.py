@@ -13,8 +13,8 @@ import yaml
 
 from horizon_mpc.config import find_config_file
 
-__all__ = ["DEFAULT_PROFILE", "Push", "Segment", "command_at", "load_profile", "load_pushes",
-           "profile_file"]
+__all__ = ["DEFAULT_PROFILE", "MAX_COMMAND", "MAX_PUSH", "Push", "Segment", "command_at",
+           "load_profile", "load_pushes", "profile_file"]
 
 DEFAULT_PROFILE = "default"  # config/commands/default.yaml (installed under share/horizon_mpc)
 
@@ -49,46 +49,110 @@ class Push:
     duration: float = 0.1
 
 
-def load_pushes(path: str | Path) -> list[Push]:
-    """The optional ``pushes:`` list of a profile YAML or name (``{time, force: [fx, fy,
-    fz], duration}``); empty when the profile has none."""
+#: |vx|, |vy| (m/s), |wz| (rad/s) a profile may command: the MPC node rejects faster
+#: commands as garbage (``horizon_mpc.nodes.mpc_inputs.ABSURD_COMMAND``), so a run with one
+#: would be scored against a command the robot never received
+MAX_COMMAND = 10.0
+#: N: the simulator refuses larger pushes (``horizon_mpc.sim.simulator.PLAUSIBLE_WRENCH``)
+MAX_PUSH = 1e6
+
+
+def _read(path: str | Path) -> tuple[Path, object]:
     path = profile_file(path)
     with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
-    items = data.get("pushes", []) if isinstance(data, dict) else []
-    pushes = []
-    for i, item in enumerate(items or []):
         try:
-            force = tuple(float(f) for f in item["force"])
-            push = Push(float(item["time"]), force, float(item.get("duration", 0.1)))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"{path}: push {i} needs time, force [fx, fy, fz] and an optional "
-                             f"duration ({exc})") from None
-        if len(force) != 3 or not push.duration > 0 or not all(map(math.isfinite, force)):
-            raise ValueError(f"{path}: push {i}: force must be 3 finite numbers and the "
-                             "duration positive")
+            data = yaml.safe_load(fh)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
+    if isinstance(data, dict):
+        unknown = set(data) - {"segments", "pushes"}
+        if unknown:
+            raise ValueError(f"{path}: unknown key(s) {sorted(unknown)}; a profile has "
+                             "'segments' and optionally 'pushes'")
+    return path, data
+
+
+def _number(value: object, where: str) -> float:
+    """A finite real number, else ValueError naming ``where``. Not a bool; a string only
+    when it spells a number (YAML 1.1 reads ``1e9``, without a dot, as a string)."""
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise ValueError(f"{where} must be a number, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{where} must be a number, got {value!r}")
+    x = float(value)
+    if not math.isfinite(x):
+        raise ValueError(f"{where} must be finite, got {value!r}")
+    return x
+
+
+def load_pushes(path: str | Path) -> list[Push]:
+    """The optional ``pushes:`` list of a profile YAML or name (``{time, force: [fx, fy,
+    fz], duration}``); empty when the profile has none.
+
+    Raises:
+        ValueError: a push that is not a mapping of those keys, a time < 0, a force that is
+            not 3 finite numbers or beyond :data:`MAX_PUSH`, a duration <= 0.
+    """
+    path, data = _read(path)
+    items = data.get("pushes") if isinstance(data, dict) else None
+    if items is None:
+        return []
+    if not isinstance(items, list):
+        raise ValueError(f"{path}: 'pushes' must be a list of {{time, force, duration}}")
+    pushes = []
+    for i, item in enumerate(items):
+        where = f"{path}: push {i}"
+        if not isinstance(item, dict) or not {"time", "force"} <= set(item) or (
+                set(item) - {"time", "force", "duration"}):
+            raise ValueError(f"{where} needs 'time', 'force' [fx, fy, fz] and optionally "
+                             f"'duration', got {item!r}")
+        force = item["force"]
+        if not isinstance(force, list) or len(force) != 3:
+            raise ValueError(f"{where}: force must be a list [fx, fy, fz], got {force!r}")
+        push = Push(_number(item["time"], f"{where}: time"),
+                    tuple(_number(f, f"{where}: force") for f in force),
+                    _number(item.get("duration", 0.1), f"{where}: duration"))
+        if push.time < 0 or not push.duration > 0:
+            raise ValueError(f"{where}: time must be >= 0 and duration > 0")
+        if max(map(abs, push.force)) > MAX_PUSH:
+            raise ValueError(f"{where}: force beyond {MAX_PUSH:g} N")
         pushes.append(push)
     return pushes
 
 
 def load_profile(path: str | Path) -> list[Segment]:
     """Segments of a command profile YAML or name (a list, or a mapping with
-    ``segments:``)."""
-    path = profile_file(path)
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
+    ``segments:``).
+
+    Raises:
+        FileNotFoundError: no such profile.
+        ValueError: not YAML, no segments, a segment that is not a mapping of ``duration``
+            (finite, > 0) and ``vx``/``vy``/``wz`` (finite numbers within
+            :data:`MAX_COMMAND`), unknown keys.
+    """
+    path, data = _read(path)
     items = data.get("segments") if isinstance(data, dict) else data
     if not isinstance(items, list) or not items:
         raise ValueError(f"{path}: expected a list of segments {{duration, vx, vy, wz}}")
     segs = []
     for i, item in enumerate(items):
+        where = f"{path}: segment {i}"
+        if not isinstance(item, dict):
+            raise ValueError(f"{where} must be a mapping {{duration, vx, vy, wz}}, got {item!r}")
         unknown = set(item) - {"duration", "vx", "vy", "wz"}
         if unknown or "duration" not in item:
-            raise ValueError(f"{path}: segment {i} needs 'duration' and only vx/vy/wz, got "
-                             f"{sorted(item)}")
-        seg = Segment(**{k: float(v) for k, v in item.items()})
+            raise ValueError(f"{where} needs 'duration' and only vx/vy/wz, got {sorted(item)}")
+        seg = Segment(**{k: _number(v, f"{where}: {k}") for k, v in item.items()})
         if not seg.duration > 0:
-            raise ValueError(f"{path}: segment {i} has non-positive duration {seg.duration}")
+            raise ValueError(f"{where} has non-positive duration {seg.duration}")
+        fast = {k: v for k, v in (("vx", seg.vx), ("vy", seg.vy), ("wz", seg.wz))
+                if abs(v) > MAX_COMMAND}
+        if fast:
+            raise ValueError(f"{where}: {fast} beyond {MAX_COMMAND:g} (m/s, rad/s), which the "
+                             "MPC node rejects as garbage")
         segs.append(seg)
     return segs
 

@@ -175,7 +175,9 @@ def write_report(rec: Recording, summary: dict, out: str | Path) -> list[Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written = [out / "summary.json"]
-    written[0].write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    # strict JSON: a figure with no samples (NaN) is null, not the NaN parsers refuse
+    written[0].write_text(json.dumps(_finite_or_null(summary), indent=2, allow_nan=False)
+                          + "\n", encoding="utf-8")
     if rec.mpc_log:
         written.append(out / "mpc_node.log")
         written[-1].write_text(rec.mpc_log + "\n", encoding="utf-8")
@@ -242,3 +244,14 @@ def write_report(rec: Recording, summary: dict, out: str | Path) -> list[Path]:
 
         written.append(write_gif(out / "run.gif", rec.frames, fps=1.0 / FRAME_PERIOD))
     return written
+
+
+def _finite_or_null(x: object) -> object:
+    """``x`` with every non-finite float (at any depth of dicts and lists) replaced by None."""
+    if isinstance(x, dict):
+        return {k: _finite_or_null(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite_or_null(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x

@@ -62,6 +62,86 @@ def test_a_bad_profile_names_the_problem(tmp_path):
         load_profile(path)
 
 
+@pytest.mark.parametrize("text, match", [
+    ("- {duration: .inf}\n", "duration must be finite"),            # ran forever
+    ("- {duration: 1.0, vx: .nan}\n", "vx must be finite"),
+    ("- {duration: 1.0, vx: 50}\n", "beyond 10"),                    # the node rejects it
+    ("- {duration: 1.0, vx: fast}\n", "vx must be a number, got 'fast'"),
+    ("- {duration: true}\n", "duration must be a number"),            # read as 1.0
+    ("- 1.0\n", "segment 0 must be a mapping"),                       # a raw TypeError
+    ("segmnts:\n  - {duration: 1.0}\n", r"unknown key\(s\) \['segmnts'\]"),
+    ("segments: [{duration: 1.0\n", "not valid YAML"),
+], ids=["inf", "nan", "absurd", "string", "bool", "scalar", "typo", "yaml"])
+def test_profile_segments_that_cannot_run_are_refused(tmp_path, text, match):
+    path = tmp_path / "p.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=match):
+        load_profile(path)
+
+
+@pytest.mark.parametrize("push, match", [
+    ("{time: 0.5, force: '123'}", r"force must be a list"),            # read as (1, 2, 3)
+    ("{time: .nan, force: [1, 0, 0]}", "time must be finite"),         # never applied
+    ("{time: -3, force: [1, 0, 0]}", "time must be >= 0"),
+    ("{time: 0.5, force: [1e9, 0, 0]}", "force beyond"),              # crashed after the build
+    ("{time: 0.5, force: [1, 0, 0], duraton: 1}", "needs 'time', 'force'"),  # ignored
+], ids=["string", "nan", "negative", "huge", "typo"])
+def test_pushes_that_cannot_run_are_refused(tmp_path, push, match):
+    path = tmp_path / "p.yaml"
+    path.write_text(f"segments:\n  - {{duration: 1.0}}\npushes:\n  - {push}\n")
+    with pytest.raises(ValueError, match=match):
+        load_pushes(path)
+
+
+def test_yaml_numbers_without_a_dot_are_numbers(tmp_path):
+    # YAML 1.1 reads 1e3 as a string
+    path = tmp_path / "p.yaml"
+    path.write_text("segments:\n  - {duration: 2}\npushes:\n  - {time: 1, force: [1e3, 0, 0]}\n")
+    assert load_pushes(path) == [Push(1.0, (1000.0, 0.0, 0.0), 0.1)]
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--duration", "0"], "--duration must be"),
+    (["--robot", "nosuch"], "no robot config 'nosuch'"),
+    (["-p", "nosuch=1"], "mpc_node has no such parameter"),           # silently ignored
+    (["-p", "robot=solo12"], "set by the closed loop"),                # hung
+    (["-p", "max_vx=abc"], "expecting type 'DOUBLE'"),               # a raw traceback
+], ids=["duration", "robot", "unknown_param", "harness_param", "param_type"])
+def test_the_cli_refuses_what_cannot_run_in_one_line_with_code_2(tmp_path, caplog, args, match):
+    from horizon_mpc.closed_loop import main
+
+    profile = tmp_path / "p.yaml"
+    profile.write_text("- {duration: 0.5}\n")
+    with caplog.at_level("ERROR"):
+        assert main(["--profile", str(profile), "--out", str(tmp_path / "out"), "--no-gif",
+                     *args]) == 2
+    assert any(match in r.getMessage() for r in caplog.records), caplog.text
+
+
+def test_the_mpc_parameter_names_are_the_nodes(walking_mpc_node_parameters):
+    from horizon_mpc.nodes.mpc_parameters import parameter_names
+
+    rclpys_own = {"use_sim_time", "start_type_description_service"}
+    assert set(parameter_names()) == walking_mpc_node_parameters - rclpys_own
+
+
+@pytest.fixture
+def walking_mpc_node_parameters():
+    import rclpy
+
+    from horizon_mpc.nodes.mpc_node import MpcNode
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        node = MpcNode(context=ctx)
+        names = set(node._parameters)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+    return names
+
+
 # the acceptance profile of the closed-loop issue (lockstep, through the ROS topics)
 STAND, FORWARD_T, LATERAL_T, TURN_T, STOP_T = 1.0, 8.0, 3.0, 3.0, 3.0
 FORWARD, LATERAL, YAW_RATE = 0.3, 0.2, 0.5

@@ -23,11 +23,14 @@ from horizon_mpc.locomotion.gaits import GAITS
 from horizon_mpc.locomotion.settings import Weights
 from horizon_mpc.nodes.declare import declare, float_range, int_range
 
-__all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "WEIGHT_FIELDS", "MpcParameters"]
+__all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MODEL_PARAMETERS", "WEIGHT_FIELDS",
+           "MpcParameters", "parameter_names"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
 LIVE_LIMITS = ("max_vx", "max_vy", "max_wz")
+# declared by MpcNode itself, before the settings they choose are read
+MODEL_PARAMETERS = ("robot", "config", "urdf_path", "robot_description")
 # Hz of the node clock: a status every fifth 50 Hz tick (diagnostic tools poll at ~1 Hz);
 # its values summarise the ticks in between (solve_time_max_ms, ticks, deadline_misses)
 DIAGNOSTICS_RATE = 10.0
@@ -148,3 +151,19 @@ class MpcParameters:
         if new:
             self.get_logger().info(f"parameters updated live: {sorted(new)}")
         return SetParametersResult(successful=True)
+
+
+def parameter_names() -> tuple[str, ...]:
+    """The names of every parameter the MPC node declares (``use_sim_time``, rclpy's own,
+    aside), without building a node: what a launcher checks ``-p NAME=VALUE`` against."""
+    values: dict[str, object] = dict.fromkeys(MODEL_PARAMETERS, "")
+
+    class _Names(MpcParameters):
+        def _declare(self, name: str, default: object, *args: object, **kwargs: object) -> None:
+            values[name] = default
+
+        def _p(self, name: str) -> object:
+            return values[name]
+
+    _Names()._declare_parameters(MpcSettings())
+    return tuple(values)
