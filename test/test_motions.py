@@ -150,6 +150,54 @@ def test_cli_rejects_bad_settings_before_solving_in_one_line(capsys):
         assert err.startswith("motion: error:") and text in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize("motion, setting, text", [
+    ("leap", "dt=0", "'dt' must be > 0"),                          # ZeroDivisionError
+    ("leap", "stand=-0.1", "'stand' must be >= 0"),                 # after the NLP build
+    ("leap", "friction=abc", "'friction' must be a number"),        # a CasADi TypeError
+    ("walk", "duration=0", "'duration' must be > 0"),               # IndexError
+    ("walk", "iterations=0", "'iterations' must be > 0"),           # 'solved', standing still
+    ("walk", "velocity=[0.2]", "'velocity' must be 3 finite numbers"),
+    ("walk", "mpc=5", "'mpc' must be a mapping"),
+    ("walk", "average_cycles=0", "'average_cycles' must be > 0"),   # NaN velocities
+    ("walk", "w_touchdown=-1", "'w_touchdown' must be >= 0"),
+    ("walk", "foo", "--set expects KEY=VALUE"),                     # exit code 1 before
+], ids=lambda x: x if isinstance(x, str) and "=" in x else None)
+def test_cli_rejects_settings_it_cannot_run_before_building(capsys, motion, setting, text):
+    from horizon_mpc.motions.cli import main
+
+    assert main([motion, "--set", setting, "--no-animation"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("motion: error:") and text in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("body, text", [
+    ("settings: [1, 2]\n", "'settings' must be a mapping"),
+    ("robots: {go2: 5}\n", "'robots' must map robot names"),
+    ("robots: [go2]\n", "'robots' must map robot names"),
+    ("solver: snopt\n", "unknown solver 'snopt'"),
+])
+def test_a_malformed_motion_config_is_one_error_line(tmp_path, capsys, body, text):
+    from horizon_mpc.motions.cli import main
+
+    path = tmp_path / "walk.yaml"
+    path.write_text(body)
+    assert main(["walk", "--config", str(path), "--no-animation"]) == 2
+    assert text in capsys.readouterr().err
+
+
+def test_a_walk_that_breaks_the_physics_is_not_solved(tmp_path, capsys):
+    # 3 m/s: defects of 3.5 and a 48 N base wrench, printed 'solved' with exit code 0
+    from horizon_mpc.motions.cli import main
+
+    assert main(["walk", "--set", "velocity=[3, 0, 0]",
+                 "--no-animation", "--out", str(tmp_path)]) == 1
+    assert "walk: NOT solved" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    stats = summary["solver_stats"]
+    assert stats["success"] is False and stats["status"] != "consistent"
+    assert summary["results"]["max_dynamics_defect"] > 1.0  # what it executed breaks physics
+
+
 def test_motion_settings_take_whole_floats_and_ints_as_their_kinds():
     from horizon_mpc.motions.settings import load_motion_config
     from horizon_mpc.motions.turn import TurnSettings

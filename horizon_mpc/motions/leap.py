@@ -19,6 +19,7 @@ from horizon_mpc.model import RobotModel
 from horizon_mpc.motions.analysis import dynamics_check, flight_phases, loaded
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import timeline_schedule
+from horizon_mpc.motions.settings import check_settings
 from horizon_mpc.motions.wholebody import (
     WholeBodyProblem,
     build_whole_body,
@@ -60,6 +61,14 @@ class LeapSettings:
     w_acceleration: float = 1e-3
     w_force: float = 1e-4
     w_torque: float = 1e-3
+
+    def __post_init__(self) -> None:
+        check_settings(self, positive=("dt", "push", "flight", "land", "friction",
+                                       "torque_limit_scale"),
+                       non_negative=("stand", "settle", "swing_floor", "foot_radius",
+                                     "replay_kp", "replay_kd", "w_posture", "w_pitch",
+                                     "w_roll_yaw", "w_lateral", "w_velocity", "w_acceleration",
+                                     "w_force", "w_torque"))
 
     @property
     def duration(self) -> float:

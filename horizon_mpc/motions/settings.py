@@ -16,6 +16,7 @@ The file is looked up like the robot configs (:func:`horizon_mpc.config.config_d
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -23,9 +24,10 @@ import yaml
 
 from horizon_mpc.config import find_config_file
 
-__all__ = ["MotionConfig", "load_motion_config"]
+__all__ = ["MotionConfig", "check_settings", "load_motion_config"]
 
 T = TypeVar("T")
+SOLVERS = ("ipopt", "gnsqp", "ilqr")
 
 
 @dataclasses.dataclass
@@ -109,11 +111,44 @@ def load_motion_config(motion: str | Path) -> MotionConfig:
     unknown = sorted(set(data) - known)
     if unknown:
         raise ValueError(f"{path}: unknown key(s) {unknown}; known: {sorted(known)}")
+    settings = data.get("settings") or {}
+    robots = data.get("robots") or {}
+    if not isinstance(settings, dict):
+        raise ValueError(f"{path}: 'settings' must be a mapping of setting: value")
+    if not isinstance(robots, dict) or not all(isinstance(v, dict) or v is None
+                                               for v in robots.values()):
+        raise ValueError(f"{path}: 'robots' must map robot names to mappings of settings")
+    solver = str(data.get("solver", "ipopt"))
+    if solver not in SOLVERS:
+        raise ValueError(f"{path}: unknown solver {solver!r}; solvers: {list(SOLVERS)}")
     return MotionConfig(
         motion=path.stem,
         robot=str(data.get("robot", "go2")),
-        solver=str(data.get("solver", "ipopt")),
-        settings=dict(data.get("settings") or {}),
-        robots={str(k): dict(v or {}) for k, v in (data.get("robots") or {}).items()},
+        solver=solver,
+        settings=dict(settings),
+        robots={str(k): dict(v or {}) for k, v in robots.items()},
         source=path,
     )
+
+
+def check_settings(settings: object, positive: tuple[str, ...] = (),
+                   non_negative: tuple[str, ...] = ()) -> None:
+    """Check a settings dataclass: every number finite, those in ``positive`` > 0, those in
+    ``non_negative`` >= 0 (an optional number, None by default, is checked when given).
+
+    Raises:
+        ValueError: naming the setting (the CLI turns it into one line, exit code 2).
+    """
+    for f in dataclasses.fields(settings):
+        value = getattr(settings, f.name)
+        if value is None or isinstance(value, (list, tuple, dict)) or isinstance(
+                _default(f), str):
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"setting {f.name!r} must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ValueError(f"setting {f.name!r} must be finite, got {value!r}")
+        if f.name in positive and not value > 0:
+            raise ValueError(f"setting {f.name!r} must be > 0, got {value!r}")
+        if f.name in non_negative and value < 0:
+            raise ValueError(f"setting {f.name!r} must be >= 0, got {value!r}")

@@ -20,6 +20,7 @@ from horizon_mpc.model import RobotModel
 from horizon_mpc.motions.analysis import dynamics_check, roll_pitch_yaw, swing_intervals
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import crawl_order, timeline_schedule
+from horizon_mpc.motions.settings import check_settings
 from horizon_mpc.motions.wholebody import (
     WholeBodyProblem,
     build_whole_body,
@@ -59,6 +60,13 @@ class TurnSettings:
     w_velocity: float = 0.1
     w_acceleration: float = 1e-3
     w_force: float = 1e-5
+
+    def __post_init__(self) -> None:
+        check_settings(self, positive=("dt", "step", "cycles", "step_height", "friction",
+                                       "torque_limit_scale"),
+                       non_negative=("stand", "pause", "settle", "foot_radius", "w_position",
+                                     "w_height", "w_upright", "w_yaw", "w_posture",
+                                     "w_velocity", "w_acceleration", "w_force"))
 
     @property
     def duration(self) -> float:
@@ -142,14 +150,18 @@ def build_turn(model: RobotModel, cfg: RobotConfig, st: TurnSettings) -> TurnPro
 
 
 def turn_summary(res: MotionResult, tp: TurnProblem, model: RobotModel,
-                 air_height: float = 1e-3) -> dict:
+                 air_height: float | None = None) -> dict:
     """The turn's figures: final errors, swing phases read from the feet heights, apexes.
 
-    ``swings_per_foot``: runs of nodes on which the foot is more than ``air_height`` (m)
-    above the ground (read from the motion, not the schedule); ``swing_apex``: the highest
-    foot height of each of them (m). Angles in deg.
+    ``swings_per_foot``: runs of nodes on which the foot is more than ``air_height`` (m;
+    default a tenth of the step height: rolling ball feet move their frames by a few mm,
+    which a 1 mm threshold counted as swings) above the ground (read from the motion, not
+    the schedule); ``swing_apex``: the highest foot height of each of them (m). Angles in
+    deg.
     """
     st = tp.settings
+    if air_height is None:
+        air_height = 0.1 * st.step_height
     out = {"target_yaw_deg": st.yaw, **final_state_errors(model, res, tp.q_final)}
     yaw = np.degrees(np.unwrap(roll_pitch_yaw(res.q[3:7].T)[:, 2]))
     out["final_yaw_deg"] = float(yaw[-1] - yaw[0])

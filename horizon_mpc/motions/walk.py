@@ -26,6 +26,7 @@ from horizon_mpc.model import RobotModel
 from horizon_mpc.motions.analysis import dynamics_check
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import touchdown_nodes
+from horizon_mpc.motions.settings import check_settings
 from horizon_mpc.motions.wholebody import robot_model
 from horizon_mpc.solvers import make_solver
 
@@ -47,6 +48,24 @@ class WalkSettings:
     w_touchdown: float = 1e6  # ILQR: touch-down height cost (1/m^2; the NLPs: a constraint)
     mpc: dict[str, Any] = field(default_factory=dict)  # overrides of the robot's ``mpc:``
 
+    def __post_init__(self) -> None:
+        check_settings(self, positive=("duration", "iterations", "bootstrap_iterations",
+                                       "nlp_max_iter", "average_cycles"),
+                       non_negative=("w_touchdown",))
+        v = self.velocity
+        if not (isinstance(v, (list, tuple)) and len(v) == 3 and all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                for x in v)):
+            raise ValueError(f"setting 'velocity' must be 3 finite numbers [vx, vy, wz], "
+                             f"got {v!r}")
+        if not isinstance(self.mpc, dict):
+            raise ValueError(f"setting 'mpc' must be a mapping of the robot's mpc: overrides, "
+                             f"got {self.mpc!r}")
+        try:  # its keys and kinds, before any build
+            MpcSettings.from_dict(self.mpc)
+        except TypeError as exc:
+            raise ValueError(f"setting 'mpc': {exc}") from None
+
 
 def _solver_options(solver: str, st: WalkSettings, mpc: MpcSettings) -> dict[str, Any]:
     if solver == "ilqr":
@@ -57,6 +76,11 @@ def _solver_options(solver: str, st: WalkSettings, mpc: MpcSettings) -> dict[str
     # with osqp's steps the stationarity measure cycles around 1e-5 once the cost is
     # converged (to 8 digits): stop at 1e-4
     return {"max_iter": st.nlp_max_iter, "qp_solver": "osqp", "tol": 1e-4}
+
+
+#: largest dynamics defect (per unit of the state) and base wrench (per unit of the weight) of
+#: an executed walk that counts as physically consistent
+CONSISTENCY = 1e-6
 
 
 def _pose_reference(q: np.ndarray, cmd: np.ndarray, n_nodes: int, dt: float) -> np.ndarray:
@@ -130,6 +154,7 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
                 slv.set_option("max_iter", max(st.bootstrap_iterations, 200))
         slv.solve()
         if first:
+            bootstrap_status = (slv.stats.success, slv.stats.status)
             if solver == "ilqr":
                 slv.set_option("rti", True)
             else:
@@ -163,6 +188,18 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
                       tick_time=np.array(tick_time), iterations=np.array(iterations),
                       violation=np.array(violation))
     res.summary = walk_summary(res, gait.period, st, model)
+    # success: the first horizon converged and the motion executed is consistent (its
+    # Euler steps and the dynamics hold: the motion a perfect model would follow); a tick
+    # may end unconverged (real-time iterations), but not a motion that breaks the physics
+    # (0 iterations per tick: defects of 0.085; 3 m/s: 3.5)
+    consistent = (res.summary["max_dynamics_defect"] <= CONSISTENCY
+                  and res.summary["max_base_wrench"] <= CONSISTENCY * model.mass * 9.81)
+    stats["success"] = bool(bootstrap_status[0] and consistent)
+    stats["status"] = ("consistent" if stats["success"] else
+                       f"bootstrap: {bootstrap_status[1]}" if not bootstrap_status[0] else
+                       f"inconsistent motion (dynamics defect "
+                       f"{res.summary['max_dynamics_defect']:.2g}, base wrench "
+                       f"{res.summary['max_base_wrench']:.2g} N)")
     log.info("walk with %s: %d ticks, %.1f ms per tick (median), mean vx %.3f m/s",
              solver, n_ticks, stats["tick_ms_median"], res.summary["mean_velocity"][0])
     return res
@@ -200,16 +237,27 @@ def walk_summary(res: MotionResult, period: float, st: WalkSettings,
     """Velocity over the last ``average_cycles`` gait cycles and force periodicity.
 
     ``mean_velocity``: mean base-frame ``(vx, vy, wz)`` over the window;
-    ``velocity_error``: ``|mean - reference| / |reference|`` (linear part);
+    ``velocity_error``: ``|mean - reference| / |reference|`` of the linear part, or of the
+    yaw rate when the linear reference is zero (turning in place), or the mean linear speed
+    (m/s) when the reference is zero;
     ``force_periodicity``: ``||f(last cycle) - f(cycle before)|| / ||f(last cycle)||``.
     """
     n_cycle = int(round(period / res.dt))
     n_win = min(st.average_cycles * n_cycle, res.n_nodes)
+    if n_win < st.average_cycles * n_cycle:
+        log.warning("walk of %.2f s: shorter than the %d gait cycles (%.2f s) the velocity "
+                    "is averaged over; averaging over all of it, start-up included",
+                    res.t[-1], st.average_cycles, st.average_cycles * period)
     v = res.v[:, -n_win - 1:-1]
     mean = np.array([v[0].mean(), v[1].mean(), v[5].mean()])
     ref = np.asarray(st.velocity, float)
     lin_ref = np.linalg.norm(ref[:2])
-    err = float(np.linalg.norm(mean[:2] - ref[:2]) / lin_ref) if lin_ref > 0 else math.nan
+    if lin_ref > 0:
+        err = float(np.linalg.norm(mean[:2] - ref[:2]) / lin_ref)
+    elif ref[2] != 0:
+        err = float(abs(mean[2] - ref[2]) / abs(ref[2]))
+    else:
+        err = float(np.linalg.norm(mean[:2]))
     out = {"velocity_reference": ref.tolist(), "mean_velocity": mean.tolist(),
            "velocity_error": err, "window": [float(res.t[-n_win - 1]), float(res.t[-1])],
            "gait_period": period, "distance": float(np.linalg.norm(res.q[:2, -1]
