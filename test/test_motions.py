@@ -477,3 +477,14 @@ def test_motion_executable_writes_every_output(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["duration"] == 0.6 and summary["nodes"] == 30
 
+
+
+def test_the_leap_events_follow_the_scheduled_flight_not_the_first_unloaded_run():
+    # a 1 m leap unloaded all feet for 4 intervals while standing: its lift-offs were read
+    # before that (None) and its front touch-down at 0.12 s instead of 0.60 s
+    from horizon_mpc.motions.analysis import best_overlap
+
+    runs = [(2, 6), (22, 30), (36, 37)]
+    assert best_overlap(runs, 22, 30) == (22, 30)
+    assert best_overlap(runs, 21, 28) == (22, 30)
+    assert best_overlap(runs, 10, 12) == (22, 30)  # no overlap: the longest

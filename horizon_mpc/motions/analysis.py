@@ -14,6 +14,7 @@ from horizon_mpc.closed_loop_report import roll_pitch_yaw
 from horizon_mpc.motions.result import MotionResult
 
 __all__ = [
+    "best_overlap",
     "contact_torques",
     "dynamics_check",
     "flight_phases",
@@ -98,6 +99,15 @@ def flight_phases(load: np.ndarray) -> list[tuple[int, int]]:
     """Runs of intervals ``[k0, k1)`` on which no foot is loaded (``load``: (n_feet, N))."""
     air = ~np.any(load, axis=0)
     return _runs(air)
+
+
+def best_overlap(runs: list[tuple[int, int]], start: int, stop: int) -> tuple[int, int]:
+    """The run ``[a, b)`` of ``runs`` (non-empty) that overlaps ``[start, stop)`` most;
+    the longest when none does."""
+    overlap = [max(0, min(b, stop) - max(a, start)) for a, b in runs]
+    if max(overlap) > 0:
+        return runs[int(np.argmax(overlap))]
+    return max(runs, key=lambda ab: ab[1] - ab[0])
 
 
 def swing_intervals(stance: np.ndarray) -> list[list[tuple[int, int]]]:

@@ -16,7 +16,7 @@ import numpy as np
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import ContactSchedule
 from horizon_mpc.model import RobotModel
-from horizon_mpc.motions.analysis import dynamics_check, flight_phases, loaded
+from horizon_mpc.motions.analysis import best_overlap, dynamics_check, flight_phases, loaded
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import timeline_schedule
 from horizon_mpc.motions.settings import check_settings
@@ -161,9 +161,12 @@ def build_leap(model: RobotModel, cfg: RobotConfig, st: LeapSettings) -> LeapPro
 def leap_summary(res: MotionResult, lp: LeapProblem, model: RobotModel) -> dict:
     """The leap's figures: final errors, phases read from the forces, torque use, dynamics.
 
-    Times in s, distances in m, angles in deg. ``hind_lift_off`` / ``front_lift_off``: end
-    of the last loaded interval of each foot before the first flight; ``front_touchdown`` /
-    ``hind_touchdown``: start of its first loaded interval after it.
+    Times in s, distances in m, angles in deg. The flight is the run of unloaded intervals
+    that overlaps the scheduled one most (``flight_phases`` lists every run; others, e.g. a
+    plan that unloads all feet for a moment while standing, are also in
+    ``unscheduled_flights``). ``hind_lift_off`` / ``front_lift_off``: end of the last loaded
+    interval of each foot before the flight; ``front_touchdown`` / ``hind_touchdown``: start
+    of its first loaded interval after it.
     """
     st = lp.settings
     q_final = lp.wb.q0.copy()
@@ -174,7 +177,11 @@ def leap_summary(res: MotionResult, lp: LeapProblem, model: RobotModel) -> dict:
     flights = flight_phases(load)
     out["flight_phases"] = [[a * res.dt, b * res.dt] for a, b in flights]
     if flights:
-        k0, k1 = flights[0]
+        s0 = round((st.stand + st.push) / res.dt)
+        s1 = s0 + max(1, round(st.flight / res.dt))
+        k0, k1 = best_overlap(flights, s0, s1)
+        out["unscheduled_flights"] = [[a * res.dt, b * res.dt] for a, b in flights
+                                      if (a, b) != (k0, k1)]
 
         def last_before(i: int) -> float | None:
             idx = np.flatnonzero(load[i, :k0])
