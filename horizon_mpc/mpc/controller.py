@@ -135,6 +135,7 @@ class WalkingMpc:
         self._prepared_for: float | None = None
         self.prepare_misses = 0  # ticks too far from the prepared time: whole ticks run
         self.restarts = 0  # ticks that restarted from a state discontinuous with the plan
+        self._pose_expected = (0.0, 0.0, 0.0)  # x, y, yaw of the warm start's node 0
 
     @staticmethod
     def config_model(cfg: RobotConfig) -> RobotModel:
@@ -168,6 +169,7 @@ class WalkingMpc:
         self._standing = {n: wp.prb.get_variable(n).initial_guess for n in ("q", "v", "a", "f")}
         self.t_last = t
         self._prepared_for = None
+        self._pose_expected = _pose(q)
         return self._plan(t)
 
     def prepare_inverse_dynamics(self, n: int) -> None:
@@ -216,6 +218,7 @@ class WalkingMpc:
         self._shift(dt_tick, q)
         self._advance_pose_ref(q, dt_tick)
         self.t_last = t
+        self._pose_expected = _pose(q)
         self._command_gait(t, cmd)
         self._set_state(q, v)
         self._set_references(t)
@@ -249,6 +252,7 @@ class WalkingMpc:
         q_pred, v_pred = self.wp.q.initial_guess[:, 0], self.wp.v.initial_guess[:, 0]
         self._advance_pose_ref(q_pred, dt_tick)
         self.t_last = t_next
+        self._pose_expected = _pose(q_pred)
         self._command_gait(t_next, cmd)
         self._set_state(q_pred, v_pred)
         self._set_references(t_next)
@@ -280,6 +284,7 @@ class WalkingMpc:
         else:
             t_plan = t
         self.t_last = t_plan
+        self._pose_expected = _pose(q)
         self.solver.feedback(np.concatenate((q, v)))
         if not self._healthy():
             self._restore_standing(q)
@@ -294,13 +299,14 @@ class WalkingMpc:
         what 2 m/s and 3 rad/s explain), or None."""
         if t < self.t_last - 0.1:
             return f"time went back {self.t_last - t:.3f} s"
-        q = np.asarray(q, dtype=float)
-        if not np.all(np.isfinite(q[:7])):
+        x, y = float(q[0]), float(q[1])
+        if not (math.isfinite(x) and math.isfinite(y)):
             return None  # the tick's failure handling applies
-        expected = self.wp.q.initial_guess[:, 0]
+        x0, y0, yaw0 = self._pose_expected
         dt = abs(t - self.t_last)
-        dist = math.hypot(q[0] - expected[0], q[1] - expected[1])
-        dyaw = abs(_wrap(_yaw(self._clean_q(q)) - _yaw(expected)))
+        dist = math.hypot(x - x0, y - y0)
+        yaw = _yaw(q)  # atan2 of the quaternion: no unit norm needed
+        dyaw = abs(_wrap(yaw - yaw0)) if math.isfinite(yaw) else 0.0
         jump = self.settings.pose_jump
         if dist > jump + 2.0 * dt or dyaw > jump + 3.0 * dt:
             return (f"the measured base pose is {dist:.3f} m / {dyaw:.3f} rad off the plan's "
@@ -477,6 +483,10 @@ def _stats_dict(stats: SolverStats) -> dict:
            if f.name not in ("history", "extra")}
     out.update({k: dict(x) if isinstance(x, dict) else x for k, x in stats.extra.items()})
     return out
+
+
+def _pose(q: np.ndarray) -> tuple[float, float, float]:
+    return float(q[0]), float(q[1]), _yaw(q)
 
 
 def _yaw(q: np.ndarray) -> float:
