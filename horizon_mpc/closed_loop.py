@@ -208,7 +208,9 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
     """One process, one executor: the simulator waits for each plan (deterministic)."""
     ctx = rclpy.Context()
     # Ctrl-C: KeyboardInterrupt in this thread (see _run_realtime)
-    rclpy.init(context=ctx, signal_handler_options=SignalHandlerOptions.NO)
+    # args=[]: the process's ROS arguments (a launch file's '-r __node:=closed_loop') would
+    # rename every node of the loop alike
+    rclpy.init(args=[], context=ctx, signal_handler_options=SignalHandlerOptions.NO)
     rec = loop.rec
     try:
         t_build = time.perf_counter()
@@ -279,7 +281,7 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
         ctx = rclpy.Context()
         # Ctrl-C is Python's KeyboardInterrupt here, raised in this thread (rclpy's handlers
         # would shut the context down from a thread of their own): the cleanup below runs
-        rclpy.init(context=ctx, domain_id=child.domain_id,
+        rclpy.init(args=[], context=ctx, domain_id=child.domain_id,
                    signal_handler_options=SignalHandlerOptions.NO)
         try:
             sim = SimNode(context=ctx, parameter_overrides=[

@@ -27,6 +27,6 @@ def generate_launch_description() -> LaunchDescription:
            "--out", LaunchConfiguration("out"), "--profile", LaunchConfiguration("profile")]
     return LaunchDescription([
         *args,
-        Node(package="horizon_mpc", executable="closed_loop", name="closed_loop",
-             arguments=cli, output="screen"),
+        # no node name: the process runs several nodes of its own (sim, mpc, the player)
+        Node(package="horizon_mpc", executable="closed_loop", arguments=cli, output="screen"),
     ])
