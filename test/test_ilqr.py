@@ -437,3 +437,33 @@ def test_a_start_that_fails_returns_the_guesses_it_failed_at():
     assert not solver.solve()
     assert solver.solution["x"].shape == (2, 11) and solver.solution["u"].shape == (1, 10)
     assert np.isnan(solver.solution["u"][0, 3])
+
+
+def test_a_single_variable_freed_after_the_build_is_refused_not_read_at_its_bound():
+    # each solve took the lower bound as its value: 'converged' at k = 0.5 (IPOPT: 4.98)
+    prb = Problem(10)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    k = prb.create_single_variable("k", 1)
+    prb.set_dynamics(cs.vertcat(x[1], -k * x[0] + u))
+    prb.set_dt(0.05)
+    x.set_bounds([1, 0], [1, 0], nodes=0)
+    k.set_bounds(2.0, 2.0)
+    prb.create_cost("track", x[0])
+    prb.create_cost("effort", u, weight=0.1)
+    solver = make_solver("ilqr", prb)
+    assert solver.solve()
+    k.set_bounds(0.5, 8.0)
+    with pytest.raises(ValueError, match=r"single variable\(s\) \['k'\]"):
+        solver.solve()
+    k.set_bounds(3.0, 3.0)  # fixed again: fine
+    assert solver.solve() and solver.solution["k"].item() == 3.0
+
+
+def test_a_failed_prepare_does_not_keep_the_last_solves_success():
+    prb = _start_at(True, None)
+    solver = make_solver("ilqr", prb)
+    assert solver.solve()
+    prb.get_variable("u").set_initial_guess(np.nan, nodes=2)
+    assert not solver.prepare()
+    assert solver.stats.success is False and solver.stats.status.startswith("prepare:")

@@ -202,6 +202,14 @@ class IlqrSolver(Solver):
         self.X = prb.stacked("state", copy=False).T.copy()  # (N+1, nx)
         self.U = prb.stacked("input", copy=False).T.copy()  # (N, nu)
         self.S = prb.stacked("single", "lower_bounds")  # fixed singles, (ns, 1)
+        if self.S.size and not np.array_equal(self.S, prb.stacked("single", "upper_bounds",
+                                                                   copy=False)):
+            # freed since the build: solving on with its lower bound would be a wrong answer
+            free = [v.name for v in prb.singles
+                    if not np.array_equal(v.lower_bounds, v.upper_bounds)]
+            raise ValueError(f"ilqr cannot optimise single variable(s) {free} (their bounds "
+                             "differ since the solver was built): fix them with equal bounds "
+                             "or use ipopt/gnsqp")
         self.P = prb.stacked("parameter")  # (np, N+1)
         xlb = prb.stacked("state", "lower_bounds", copy=False)  # read-only views
         xub = prb.stacked("state", "upper_bounds", copy=False)
@@ -652,12 +660,14 @@ class IlqrSolver(Solver):
         t_start = time.perf_counter()
         ev = self._begin_call()
         if ev is None:
+            self.stats.success = False  # not the last solve's
             self.stats.status = f"prepare: {self._not_finite_status()}"
             return False
         info = self._new_info()
         lq = self._lq_step(ev, info)
         self._time("prepare", time.perf_counter() - t_start)
         if lq is None:
+            self.stats.success = False
             self.stats.status = ("prepare: regularisation limit reached"
                                  if info.get("backward_failed") else
                                  "prepare: linearisation not finite")
