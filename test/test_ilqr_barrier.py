@@ -184,3 +184,21 @@ def test_the_compiled_rows_match_numpy_in_both_modes(mode):
     np.testing.assert_allclose(fast.value(c), ref.value(c), rtol=1e-13)
     with pytest.raises(ValueError, match="the rows have shape"):
         fast.set_bounds(lb[:3], ub[:3])
+
+
+def test_a_solved_barrier_problem_stops_instead_of_running_to_max_iter():
+    # the barrier's optimum leaves bound rows past their bounds (its relaxation): the
+    # solve ran all of max_iter (1000) with an expected decrease of 1e-13
+    from ocps import pendulum_swing_up
+
+    from horizon_mpc import make_solver
+
+    solver = make_solver("ilqr", pendulum_swing_up(4.0), {
+        "inequality": "barrier", "barrier_mu": 1e-2, "barrier_delta": 1e-2, "max_iter": 500})
+    solver.solve()
+    st = solver.stats
+    if st.constraint_violation > solver.opts["tol_constraint"]:
+        assert st.status.startswith("stationary: the barrier's optimum") and not st.success
+    else:
+        assert st.success
+    assert st.iterations < 500

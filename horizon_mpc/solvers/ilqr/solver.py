@@ -326,7 +326,8 @@ class IlqrSolver(Solver):
             return {"gap": ce.gap.copy(), "r": ce.r.copy(), "c": c,
                     "rN": ce.rN.reshape(1, m.nrN).copy(), "cN": ce.cN.reshape(1, m.ncN).copy(),
                     "d0": ce.d0.copy(), "eq_l1": eq_l1, "cost": cost, "al": al,
-                    "gap_l1": gap_l1, "viol_fixed": (vf := self._fixed_violation(c)),
+                    "gap_l1": gap_l1, "viol_eq": max(gap_max, eq_max),
+                    "viol_fixed": (vf := self._fixed_violation(c)),
                     "viol_free": (v := max(gap_max, eq_max, al_viol)), "viol": max(v, vf)}
         gap, r, c = self._values(X[:N].T, U.T, self._singles_per_node(), self.P[:, :N], X[1:].T)
         rN, cN = self._values_term(X[N], self.S, self.P[:, N])
@@ -347,7 +348,7 @@ class IlqrSolver(Solver):
         return {
             "gap": gap, "r": r, "c": c, "rN": rN, "cN": cN, "d0": d0,
             "eq_l1": eq_l1, "cost": cost, "al": al + alN, "gap_l1": gap_l1,
-            "viol_fixed": (vf := self._fixed_violation(c)),
+            "viol_eq": max(gap_max, eq_max), "viol_fixed": (vf := self._fixed_violation(c)),
             "viol_free": (v := max(gap_max, eq_max, al_viol, alN_viol)), "viol": max(v, vf),
         }
 
@@ -606,6 +607,12 @@ class IlqrSolver(Solver):
                          ev["viol"], info["alpha"], self.mu)
             if not rti and stationary and ev["viol"] <= o["tol_constraint"]:
                 status, converged = "converged", True
+                break
+            if not rti and stationary and self._al.barrier and (
+                    ev["viol_eq"] <= o["tol_constraint"]):
+                # the barrier problem is solved; what its rows are still past their bounds
+                # is its relaxation, which more iterations do not change
+                status = "stationary: the barrier's optimum, inequality rows past their bounds"
                 break
             if not rti and stationary and ev["viol_free"] <= o["tol_constraint"] < (
                     ev["viol_fixed"]):
