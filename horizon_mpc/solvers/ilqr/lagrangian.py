@@ -264,6 +264,11 @@ class AugmentedLagrangian:
             if a.shape[0] > 1:
                 a[:-1] = a[1:]
 
+    def reset_penalties(self) -> None:
+        """Penalties back to ``rho0`` (multipliers kept)."""
+        self.rho[:] = self.rho0
+        self._last_violation[:] = np.inf
+
     def reset(self) -> None:
         """Forget multipliers and penalties."""
         self.lam[:] = self.lam_lo[:] = self.lam_up[:] = 0.0

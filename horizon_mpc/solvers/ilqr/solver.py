@@ -635,6 +635,12 @@ class IlqrSolver(Solver):
         if rti:
             status = "rti" if status != "time budget" else status
             converged = self._rti_success(ev)
+        elif not converged:
+            # the next solve starts from the initial penalties (multipliers kept): those a
+            # failed solve ratcheted to rho_max, carried on by shift(), left every later
+            # solve of a receding horizon ill-conditioned (it failed from then on)
+            self._al.reset_penalties()
+            self._alN.reset_penalties()
         self.stats.iterations = it
         self.stats.status = status
         self.stats.success = bool(converged)
