@@ -49,7 +49,7 @@ from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen, render_replay
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.nodes.mpc_node import MpcNode
-from horizon_mpc.nodes.mpc_parameters import parameter_names
+from horizon_mpc.nodes.mpc_parameters import MODEL_PARAMETERS, parameter_names
 from horizon_mpc.nodes.mpc_process import (
     MpcMonitor,
     MpcProcess,
@@ -447,8 +447,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 # set by this launcher (the simulator is built for --robot, lockstep needs trigger 'state')
-_HARNESS_PARAMETERS = ("robot", "config", "urdf_path", "robot_description", "trigger",
-                       "use_sim_time")
+_HARNESS_PARAMETERS = (*MODEL_PARAMETERS, "trigger", "use_sim_time")
 
 
 def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, list, dict]:

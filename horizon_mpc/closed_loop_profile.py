@@ -12,6 +12,8 @@ import numpy as np
 import yaml
 
 from horizon_mpc.config import find_config_file
+from horizon_mpc.nodes.mpc_inputs import ABSURD_COMMAND
+from horizon_mpc.sim.simulator import PLAUSIBLE_WRENCH
 
 __all__ = ["DEFAULT_PROFILE", "MAX_COMMAND", "MAX_PUSH", "Push", "Segment", "command_at",
            "load_profile", "load_pushes", "profile_file"]
@@ -50,11 +52,11 @@ class Push:
 
 
 #: |vx|, |vy| (m/s), |wz| (rad/s) a profile may command: the MPC node rejects faster
-#: commands as garbage (``horizon_mpc.nodes.mpc_inputs.ABSURD_COMMAND``), so a run with one
-#: would be scored against a command the robot never received
-MAX_COMMAND = 10.0
-#: N: the simulator refuses larger pushes (``horizon_mpc.sim.simulator.PLAUSIBLE_WRENCH``)
-MAX_PUSH = 1e6
+#: commands as garbage, so a run with one would be scored against a command the robot
+#: never received
+MAX_COMMAND = ABSURD_COMMAND
+#: N: the simulator refuses larger pushes
+MAX_PUSH = PLAUSIBLE_WRENCH
 
 
 def _read(path: str | Path) -> tuple[Path, object]:

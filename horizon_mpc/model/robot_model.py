@@ -151,6 +151,12 @@ class RobotModel(SymbolicFunctions):
             floating_base = name not in FIXED_BASE_ROBOTS
         return cls.from_urdf(files.urdf, floating_base=floating_base, srdf=files.srdf, name=name)
 
+    @classmethod
+    def from_config(cls, cfg) -> RobotModel:
+        """Model of a robot config (:class:`horizon_mpc.config.RobotConfig`): its
+        ``urdf_path`` when it has one, else its example-robot-data robot."""
+        return cls.from_urdf(cfg.urdf_path) if cfg.urdf_path else cls.from_example(cfg.robot)
+
     # ------------------------------------------------------------------ information
     def neutral(self) -> np.ndarray:
         """Neutral configuration (nq,): base at origin, identity quaternion, joints at 0."""

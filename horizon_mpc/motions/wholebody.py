@@ -207,8 +207,7 @@ def robot_model(cfg: RobotConfig, locked: Sequence[str] = ()) -> RobotModel:
     Raises:
         ValueError: a pattern that matches no joint (the message lists the joints).
     """
-    full = RobotModel.from_urdf(cfg.urdf_path) if cfg.urdf_path else RobotModel.from_example(
-        cfg.robot)
+    full = RobotModel.from_config(cfg)
     if not locked:
         return full
     names = [n for n in full.joint_names if any(fnmatch.fnmatchcase(n, p) for p in locked)]

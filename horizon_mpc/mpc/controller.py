@@ -90,8 +90,7 @@ class WalkingMpc:
     def __init__(self, cfg: RobotConfig | str, model: RobotModel | None = None,
                  settings: MpcSettings | None = None, iterations: int | None = None):
         self.cfg = load_robot_config(cfg) if isinstance(cfg, str) else cfg
-        self.model = model if model is not None else self.config_model(self.cfg)
-        model = self.model
+        self.model = model = model if model is not None else RobotModel.from_config(self.cfg)
         self.settings = settings or MpcSettings.from_dict(self.cfg.section("mpc"))
         if iterations is None:
             iterations = self.settings.iterations
@@ -136,12 +135,6 @@ class WalkingMpc:
         self.prepare_misses = 0  # ticks too far from the prepared time: whole ticks run
         self.restarts = 0  # ticks that restarted from a state discontinuous with the plan
         self._pose_expected = (0.0, 0.0, 0.0)  # x, y, yaw of the warm start's node 0
-
-    @staticmethod
-    def config_model(cfg: RobotConfig) -> RobotModel:
-        """The robot config's own model: its ``urdf_path``, else its example robot."""
-        return (RobotModel.from_urdf(cfg.urdf_path) if cfg.urdf_path
-                else RobotModel.from_example(cfg.robot))
 
     # ------------------------------------------------------------------ set-up
     def start(self, q: np.ndarray, v: np.ndarray, t: float = 0.0,

@@ -102,10 +102,11 @@ class MpcNode(MpcParameters, Node):
         if mpc is None:
             model = robot_model(cfg, str(self._p("urdf_path")),
                                 str(self._p("robot_description")))
-            model = model if model is not None else WalkingMpc.config_model(cfg)
+            model = model if model is not None else RobotModel.from_config(cfg)
             _check_joints(model)  # before the build (tens of seconds)
             mpc = WalkingMpc(cfg, model, settings=settings, iterations=self._p("iterations"))
         else:
+            _check_joints(mpc.model)
             mpc.set_gait(g.name, g.step_duration, g.step_height, g.duty_factor)
             mpc.set_stand_when_idle(settings.stand_when_idle)
             mpc.wp.set_weights(settings.weights)
@@ -118,7 +119,6 @@ class MpcNode(MpcParameters, Node):
             f"({settings.n_nodes} nodes x {settings.dt:g} s, {mpc.iterations} "
             f"iteration(s)/tick, gait {g.name})")
         self.joint_names = list(mpc.model.joint_names)
-        _check_joints(mpc.model)
         # readings far outside these are refused (a wrong joint offset, a garbled message);
         # an empty range (lower >= upper, e.g. centauro's wheels at [0, 0]) is no limit
         lo, hi = mpc.model.q_lower[7:].copy(), mpc.model.q_upper[7:].copy()

@@ -281,19 +281,16 @@ class GnSqpSolver(NlpSolver):
 
     def _line_search(self, w, d, p, f, g, grad, mu, slack, lbg, ubg) -> float | None:
         """Backtracking (non-monotone Armijo) on the l1 merit; the step length or None."""
-        def infeasibility(gv: np.ndarray) -> float:
-            return float(np.sum(np.maximum(0.0, np.maximum(lbg - gv, gv - ubg))))
-
-        phi0 = f + mu * infeasibility(g)
+        phi0 = f + mu * _l1_violation(g, lbg, ubg)
         self._merit_history.append(phi0)
         ref = max(self._merit_history[-self.opts["nonmonotone"]:])
         slack_tol = 1e-12 * max(1.0, abs(ref))  # rounding of the merit near convergence
         # directional derivative of the merit along d (the linearisation leaves `slack`)
-        slope = min(0.0, float(grad @ d) + mu * (slack - infeasibility(g)))
+        slope = min(0.0, float(grad @ d) + mu * (slack - _l1_violation(g, lbg, ubg)))
         alpha = 1.0
         while alpha >= self.opts["min_step"]:
             f1, g1 = self._evaluate(w + alpha * d, p)
-            phi1 = float(f1) + mu * infeasibility(g1.full().ravel())
+            phi1 = float(f1) + mu * _l1_violation(g1.full().ravel(), lbg, ubg)
             if phi1 <= ref + self.opts["armijo"] * alpha * slope + slack_tol:
                 return alpha
             alpha *= 0.5
