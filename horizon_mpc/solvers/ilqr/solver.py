@@ -326,9 +326,7 @@ class IlqrSolver(Solver):
             return {"gap": ce.gap.copy(), "r": ce.r.copy(), "c": c,
                     "rN": ce.rN.reshape(1, m.nrN).copy(), "cN": ce.cN.reshape(1, m.ncN).copy(),
                     "d0": ce.d0.copy(), "eq_l1": eq_l1, "cost": cost, "al": al,
-                    "gap_l1": gap_l1, "viol_eq": max(gap_max, eq_max),
-                    "viol_fixed": (vf := self._fixed_violation(c)),
-                    "viol_free": (v := max(gap_max, eq_max, al_viol)), "viol": max(v, vf)}
+                    "gap_l1": gap_l1, **self._violations(c, gap_max, eq_max, al_viol)}
         gap, r, c = self._values(X[:N].T, U.T, self._singles_per_node(), self.P[:, :N], X[1:].T)
         rN, cN = self._values_term(X[N], self.S, self.P[:, N])
         gap, r, c = gap.T.copy(), r.T.copy(), c.T.copy()  # (N, ndx), (N, nr), (N, nc)
@@ -348,17 +346,23 @@ class IlqrSolver(Solver):
         return {
             "gap": gap, "r": r, "c": c, "rN": rN, "cN": cN, "d0": d0,
             "eq_l1": eq_l1, "cost": cost, "al": al + alN, "gap_l1": gap_l1,
-            "viol_eq": max(gap_max, eq_max), "viol_fixed": (vf := self._fixed_violation(c)),
-            "viol_free": (v := max(gap_max, eq_max, al_viol, alN_viol)), "viol": max(v, vf),
+            **self._violations(c, gap_max, eq_max, max(al_viol, alN_viol)),
         }
 
-    def _fixed_violation(self, c: np.ndarray) -> float:
-        """Violation of the state-only rows at a fixed node 0 (left out of the steps)."""
-        if self._fixed_rows is None:
-            return 0.0
-        rows, lb, ub = self._fixed_rows
-        c0 = c[0, rows]
-        return float(np.max(np.maximum(lb - c0, c0 - ub), initial=0.0))
+    def _violations(self, c: np.ndarray, gap_max: float, eq_max: float,
+                    al_viol: float) -> dict[str, float]:
+        """The evaluation's violations (inf-norms): ``viol_eq`` of the dynamics and the
+        projected equalities, ``viol_free`` with the augmented-Lagrangian rows too,
+        ``viol_fixed`` of the state-only rows at a fixed node 0 (left out of the steps),
+        ``viol`` of everything."""
+        fixed = 0.0
+        if self._fixed_rows is not None:
+            rows, lb, ub = self._fixed_rows
+            c0 = c[0, rows]
+            fixed = float(np.max(np.maximum(lb - c0, c0 - ub), initial=0.0))
+        eq = max(gap_max, eq_max)
+        free = max(eq, al_viol)
+        return {"viol_eq": eq, "viol_free": free, "viol_fixed": fixed, "viol": max(free, fixed)}
 
     def _merit(self, ev: dict[str, Any], nu: float) -> float:
         return ev["cost"] + ev["al"] + nu * (ev["gap_l1"] + ev["eq_l1"])
