@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -260,11 +259,8 @@ class Simulator:
             self._steps = 0
 
     def _state_finite(self) -> bool:
-        pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
-        lin, ang = p.getBaseVelocity(self.body, physicsClientId=self.client)
-        states = p.getJointStates(self.body, self._pb_joints, physicsClientId=self.client)
-        values = [*pos, *orn, *lin, *ang, *(x for s in states for x in s[:2])]
-        return all(map(math.isfinite, values))
+        st = self.state()
+        return bool(np.all(np.isfinite(st.q)) and np.all(np.isfinite(st.v)))
 
     def set_state(self, q: np.ndarray, v: np.ndarray | None = None) -> None:
         """Teleport the robot to ``q`` (nq,) with velocity ``v`` (nv,) (Pinocchio conventions)."""
