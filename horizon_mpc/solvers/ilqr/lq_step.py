@@ -41,7 +41,8 @@ __all__ = ["CompiledLqStep"]
 log = logging.getLogger(__name__)
 
 _p, _i, _d = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
-_N_SR, _N_IN, _N_OUT, _N_RO = 10, 14, 7, 6  # riccati.h's argument counts
+_N_SR, _N_IN, _N_OUT, _N_RO = 10, 16, 7, 8  # riccati.h's argument counts
+_IN_BLO, _RO_LO = 14, 6  # the box entries of the backward and rollout tables (lo, then hi)
 
 
 class _LqStep(ctypes.Structure):  # lq_step of lq_step.c
@@ -143,6 +144,9 @@ class CompiledLqStep:
         self._rolled = 0  # the gains of the last rollout (not written until the next one)
         self._valid = False  # no failed pass since the last good one
         self.dX, self.dU = np.zeros((N + 1, ndx)), np.zeros((N, nu))
+        # the box of du (riccati.py's), filled in place by the caller; used by a backward
+        # pass and a rollout called with box=True
+        self.box_lo, self.box_hi = np.full((N, nu), -np.inf), np.full((N, nu), np.inf)
         self._stats = np.zeros(4)
         for name in ("W", "rows", "pinv"):
             setattr(s, name, getattr(self, "_" + name).ctypes.data)
@@ -166,12 +170,19 @@ class CompiledLqStep:
                 ("lux", q["lux"], (N, nu, ndx)), ("f", None, (N, ndx)),
                 ("lxN", lxN, (ndx,)), ("lxxN", q["lxxN"], (ndx, ndx)),
                 ("P_e", self.P_e, (N, nu)), ("P_x", self.P_x, (N, nu, ndx)),
-                ("Z", self.Z, (N, nu, nu)), ("free", self.free, (N, nu))], s.bw_in, s.bw_st)
+                ("Z", self.Z, (N, nu, nu)), ("free", self.free, (N, nu)),
+                ("box lo", self.box_lo, (N, nu)), ("box hi", self.box_hi, (N, nu))],
+               s.bw_in, s.bw_st)
         for j, a in enumerate(self._bw):
             s.bw_out[j + 1] = a.ctypes.data
         _table([("A", q["A"], (N, ndx, ndx)), ("B", q["B"], (N, ndx, nu)),
                 ("f", None, (N, ndx)), ("K", None, (N, nu, ndx)),
-                ("k", self._bw[0], (N, nu)), ("dx0", None, (ndx,))], s.ro_in, s.ro_st)
+                ("k", self._bw[0], (N, nu)), ("dx0", None, (ndx,)),
+                ("box lo", self.box_lo, (N, nu)), ("box hi", self.box_hi, (N, nu))],
+               s.ro_in, s.ro_st)
+        self._box_ptrs = (self.box_lo.ctypes.data, self.box_hi.ctypes.data)
+        self._set_box(s.bw_in, _IN_BLO, False)  # no box until a call asks for it
+        self._set_box(s.ro_in, _RO_LO, False)
         self._ptr = ctypes.pointer(s)
         self._K_ptr = tuple(K.ctypes.data for K in self._K)
         self._stats_ptr = self._stats.ctypes.data
@@ -251,12 +262,16 @@ class CompiledLqStep:
                                       self._con.view(bool), int(np.count_nonzero(unmet)))
         return self._projection
 
-    def backward(self, gap: np.ndarray, mu: float,
-                 proj: Projection | None) -> BackwardResult | None:
+    def _set_box(self, table: ctypes.Array, first: int, box: bool) -> None:
+        table[first], table[first + 1] = self._box_ptrs if box else (None, None)
+
+    def backward(self, gap: np.ndarray, mu: float, proj: Projection | None,
+                 box: bool = False) -> BackwardResult | None:
         """:func:`.riccati_c.backward_pass_c` of the bound quadratisation with the defects
-        gap (N, ndx) (C-contiguous), regularisation ``mu`` and ``proj`` (None, or the last
-        :meth:`project`'s result). None when a (reduced) Q_uu is not positive definite or a
-        feed-forward term is not finite (the earlier results' gains stay as they were).
+        gap (N, ndx) (C-contiguous), regularisation ``mu``, ``proj`` (None, or the last
+        :meth:`project`'s result) and, with ``box``, the box ``(box_lo, box_hi)``. None when
+        a (reduced) Q_uu is not positive definite or a feed-forward term is not finite (the
+        earlier results' gains stay as they were).
 
         Raises:
             ValueError: ``proj`` is not this instance's last projection, or gap's shape.
@@ -266,6 +281,7 @@ class CompiledLqStep:
             raise ValueError("proj must be the last projection of this CompiledLqStep")
         nxt = ({0, 1, 2} - {self._cur, self._rolled}).pop()
         self._valid = False
+        self._set_box(self._s.bw_in, _IN_BLO, box)
         ret = self._lib.lq_backward(self._ptr, self._pointer("gap", gap, (self.N, self.ndx),
                                                              np.float64),
                                     float(mu), proj is not None, self._K_ptr[nxt],
@@ -280,10 +296,11 @@ class CompiledLqStep:
         return self._results[nxt]
 
     def rollout(self, gap: np.ndarray, bw: BackwardResult, dx0: np.ndarray,
-                proj: Projection | None) -> tuple[np.ndarray, np.ndarray,
-                                                  tuple[float, float, float, float]]:
+                proj: Projection | None, box: bool = False,
+                ) -> tuple[np.ndarray, np.ndarray, tuple[float, float, float, float]]:
         """The full step ``dX (N+1, ndx), dU (N, nu)`` of the last backward pass ``bw`` from
-        dx0 (ndx,) with the defects gap (N, ndx), and its measures (slope, largest
+        dx0 (ndx,) with the defects gap (N, ndx) (``box``: du clamped into the box), and
+        its measures (slope, largest
         multiplier estimate, max |dX|, max |dU|) as :func:`.merit.step_stats` gives them
         (with proj's D^+). dX and dU are overwritten by the next call.
 
@@ -298,6 +315,7 @@ class CompiledLqStep:
             raise ValueError("proj must be the last projection of this CompiledLqStep")
         dx0 = np.ascontiguousarray(dx0, dtype=np.float64)
         m = 0 if proj is None else proj.pinv.shape[2]
+        self._set_box(self._s.ro_in, _RO_LO, box)
         if self._lib.lq_rollout(self._ptr, self._pointer("gap", gap, (self.N, self.ndx),
                                                          np.float64),
                                 self._K_ptr[self._cur],

@@ -32,18 +32,27 @@
 
 #include "riccati.h"  /* the entry points and their argument orders */
 
+#define BOX_QP_MAX_ITER 100  /* riccati.py's */
 #define NB 4  /* rows per block of the Cholesky factorisation and solves (= the tile rows) */
 
 /* doubles of workspace of riccati_backward */
 static size_t workspace_size(int ndx, int nu)
 {
     size_t m = (size_t)ndx + (size_t)nu, x = (size_t)ndx, u = (size_t)nu;
-    return 2 * x * m + 3 * x + m + 5 * u * u + 5 * u * x + 4 * u;
+    return 2 * x * m + 3 * x + m + 5 * u * u + 5 * u * x + 10 * u;
 }
 
 /* element (i, r, c) of input k, through its strides */
 #define EL(k, i, r, c) (in[k] + (ptrdiff_t)(i) * st[3 * (k)] + (ptrdiff_t)(r) * st[3 * (k) + 1] \
                         + (ptrdiff_t)(c) * st[3 * (k) + 2])
+
+/* 1 if a node's box (lo, hi: nu values of element strides ls, hs) has a finite bound */
+static int boxed(int nu, const double *lo, const double *hi, ptrdiff_t ls, ptrdiff_t hs)
+{
+    for (int a = 0; a < nu; a++)
+        if (isfinite(lo[a * ls]) || isfinite(hi[a * hs])) return 1;
+    return 0;
+}
 
 #define RICCATI_KERNEL_PASS 1
 /* ---- baseline ISA: 2-wide vectors */
@@ -87,9 +96,11 @@ static int use_avx2(int variant) { return variant != 1 && riccati_has_avx2(); }
 
 /*
  * Riccati recursion of riccati.py's backward_pass.
- *  in[N_IN]: A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, P_e, P_x, Z, free (the last four
- *      are only read at nodes flagged in con); st[3 * N_IN]: element strides of each (node,
- *      row, column; the 1-D lxN uses the first of its triple, the 2-D lxxN the first two).
+ *  in[N_IN]: A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, P_e, P_x, Z, free (these four
+ *      are only read at nodes flagged in con), lo, hi ((N, nu) bounds of du, -inf/inf for
+ *      none, or both NULL: riccati.py's box, read at the other nodes); st[3 * N_IN]: element
+ *      strides of each (node, row, column; the 1-D lxN uses the first of its triple, the
+ *      2-D lxxN the first two).
  *  mu: added to the diagonal of every Q_uu.
  *  con: N flags (node with projected equality rows) or NULL.
  *  pat: NULL (A and B dense) or the structural nonzeros of [A | B] (ndx x (ndx + nu)), the
@@ -129,7 +140,8 @@ int riccati_backward(int N, int ndx, int nu, const double *const *in, const int6
 
 /*
  * Linear rollout of riccati.py's linear_rollout.
- *  in[N_RO]: A, B, f, K, k, dx0; st[3 * N_RO]: their element strides (node, row, column).
+ *  in[N_RO]: A, B, f, K, k, dx0, lo, hi (the box du is clamped into, or both NULL);
+ *      st[3 * N_RO]: their element strides (node, row, column).
  *  dX (N+1, ndx), dU (N, nu): C-contiguous outputs.
  * Returns 0, or -1: out of memory.
  */
@@ -450,6 +462,8 @@ int riccati_stack_rows(int N, int nu, int ndx, int nc, int m, int k, int j, int 
 #define chol_solve_vec ISA(chol_solve_vec)
 #define lower_to_upper ISA(lower_to_upper)
 #define backward ISA(backward)
+#define box_qp ISA(box_qp)
+#define qp_value ISA(qp_value)
 #define rollout ISA(rollout)
 #define project ISA(project)
 
@@ -711,6 +725,72 @@ static void chol_solve_vec(int n, const double *U, double *x)
     }
 }
 
+/* 0.5 x^T H x + q^T x (H: n x n, row-major) */
+static double qp_value(int n, const double *H, const double *q, const double *x)
+{
+    double v = 0.0;
+    for (int a = 0; a < n; a++) v += x[a] * (0.5 * dot(n, H + (size_t)a * n, x) + q[a]);
+    return v;
+}
+
+/* riccati.py's box_qp: x (n) := argmin 0.5 x^T H x + q^T x, lo <= x <= hi, by projected
+ * Newton from clip(0, lo, hi). On return free (nfree ints) lists the inputs not clamped at x
+ * and U (nfree x nfree) holds the upper Cholesky factor of H on them. Workspace: Hf
+ * (n x n), g, d, xt, r (n each). Returns 0, or 1: H on a free set is not positive definite. */
+static int box_qp(int n, const double *H, const double *q, const double *lo,
+                  const double *hi, double *x, int *free, int *nfree, double *Hf, double *U,
+                  double *g, double *d, double *xt, double *r)
+{
+    for (int a = 0; a < n; a++) {
+        double v = 0.0;
+        if (v < lo[a]) v = lo[a];
+        if (v > hi[a]) v = hi[a];
+        x[a] = v;
+    }
+    for (int it = 0;; it++) {
+        int nf = 0;
+        for (int a = 0; a < n; a++) {
+            g[a] = q[a] + dot(n, H + (size_t)a * n, x);
+            int clamped = lo[a] == hi[a] || (x[a] <= lo[a] && g[a] > 0.0)
+                          || (x[a] >= hi[a] && g[a] < 0.0);
+            if (!clamped) free[nf++] = a;
+        }
+        *nfree = nf;
+        if (!nf) return 0;
+        for (int a = 0; a < nf; a++)
+            for (int b = 0; b < nf; b++) Hf[a * nf + b] = H[(size_t)free[a] * n + free[b]];
+        lower_to_upper(nf, Hf, nf, U);
+        if (chol_upper(nf, U)) return 1;
+        for (int a = 0; a < nf; a++) r[a] = -g[free[a]];
+        chol_solve_vec(nf, U, r);
+        for (int a = 0; a < n; a++) d[a] = 0.0;
+        for (int a = 0; a < nf; a++) d[free[a]] = r[a];
+        double slope = dot(n, g, d);
+        if (it == BOX_QP_MAX_ITER || !(slope < -1e-14 * (1.0 + fabs(dot(n, q, x)))))
+            return 0;
+        /* Armijo search along the projected path */
+        double value = qp_value(n, H, q, x), step = 1.0;
+        int accepted = 0;
+        while (step > 1e-10) {
+            double gd = 0.0;
+            for (int a = 0; a < n; a++) {
+                double v = x[a] + step * d[a];
+                if (v < lo[a]) v = lo[a];
+                if (v > hi[a]) v = hi[a];
+                xt[a] = v;
+                gd += g[a] * (v - x[a]);
+            }
+            if (qp_value(n, H, q, xt) - value <= 0.1 * gd) {
+                accepted = 1;
+                break;
+            }
+            step *= 0.6;
+        }
+        if (!accepted) return 0;
+        copy(n, xt, x);
+    }
+}
+
 /* The recursion (see riccati_backward); w: workspace_size doubles, cols: nu ints. */
 static int backward(int N, int ndx, int nu, const double *const *in, const int64_t *st,
                     double mu, const uint8_t *con, const int *pat, double *const *out,
@@ -740,7 +820,9 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
     double *Quxl = Quul + nu * nu;  /* nl x ndx: Q_ux on the live inputs */
     double *Kl = Quxl + nu * ndx;   /* nl x ndx: K on the live inputs */
     double *gl = Kl + nu * ndx;     /* nl: Q_uu P_e + Q_u on the live inputs */
-    int *live = cols + nu;          /* nl: the live inputs */
+    double *blo = gl + nu;          /* nu each: the box of du, box_qp's workspace */
+    double *bhi = blo + nu, *bg = bhi + nu, *bd = bg + nu, *bxt = bd + nu, *br = bxt + nu;
+    int *live = cols + nu;          /* nl: the live (box: the free) inputs */
 
     get_mat(ndx, ndx, in[IN_LXXN], st[3 * IN_LXXN], st[3 * IN_LXXN + 1],
             S + (size_t)N * ndx * ndx, ndx);
@@ -905,6 +987,38 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
                 axpy(ndx, va, Kli + (size_t)a * ndx, acc);
             }
             for (int a = 0; a < nu; a++) axpy(ndx, ki[a], Qux + a * ndx, acc);
+        } else if (in[IN_BLO] && boxed(nu, EL(IN_BLO, i, 0, 0), EL(IN_BHI, i, 0, 0),
+                                       st[3 * IN_BLO + 1], st[3 * IN_BHI + 1])) {
+            /* the box of du: k from box_qp, K = -Q_ff^-1 Q_fx on its free inputs (zero rows
+             * for the clamped ones); S_i, s_i the cost-to-go of that policy, as with a
+             * projection: Q_xx + K^T (Q_uu K + 2 Q_ux) (symmetric part), Q_x + K^T (Q_uu k
+             * + Q_u) + Q_ux^T k, over the free inputs */
+            get_vec(nu, EL(IN_BLO, i, 0, 0), st[3 * IN_BLO + 1], blo);
+            get_vec(nu, EL(IN_BHI, i, 0, 0), st[3 * IN_BHI + 1], bhi);
+            int nl = 0;
+            if (box_qp(nu, Quu, Qu, blo, bhi, ki, live, &nl, Quul, U, bg, bd, bxt, br)) {
+                *fail_node = i;
+                return 1;
+            }
+            for (int p = 0; p < nu * ndx; p++) Ki[p] = 0.0;
+            for (int c = 0; c < ndx; c++) acc[c] = 0.0;
+            if (nl) {
+                for (int a = 0; a < nl; a++)
+                    for (int c = 0; c < ndx; c++) Kl[a * ndx + c] = -Qux[(size_t)live[a] * ndx + c];
+                chol_solve(nl, U, ndx, Kl, ndx);
+                for (int a = 0; a < nl; a++) {
+                    copy(ndx, Kl + (size_t)a * ndx, Ki + (size_t)live[a] * ndx);
+                    for (int b = 0; b < nl; b++) Quul[a * nl + b] = Quu[live[a] * nu + live[b]];
+                    for (int c = 0; c < ndx; c++) T[a * ndx + c] = 2.0 * Qux[(size_t)live[a] * ndx + c];
+                }
+                gemm(nl, ndx, nl, Quul, nl, 1, Kl, ndx, T, ndx, 1);
+                gemm(ndx, ndx, nl, Kl, 1, ndx, T, ndx, Si, ndx, 1);
+                for (int a = 0; a < nl; a++) {
+                    double va = dot(nu, Quu + (size_t)live[a] * nu, ki) + Qu[live[a]];
+                    axpy(ndx, va, Kl + (size_t)a * ndx, acc);
+                }
+            }
+            for (int a = 0; a < nu; a++) axpy(ndx, ki[a], Qux + a * ndx, acc);
         } else {
             /* K = -Q_uu^-1 Q_ux, k = -Q_uu^-1 Q_u; S_i = Q_xx + Q_ux^T K, s_i = Q_x + Q_ux^T k */
             lower_to_upper(nu, Quu, nu, U);
@@ -942,6 +1056,14 @@ static void rollout(int N, int ndx, int nu, const double *const *in, const int64
         matvec(nu, ndx, EL(RO_K, i, 0, 0), st[3 * RO_K + 1], st[3 * RO_K + 2], x, u);
         const double *k = EL(RO_KFF, i, 0, 0);
         for (int a = 0; a < nu; a++) u[a] += k[a * st[3 * RO_KFF + 1]];
+        if (in[RO_LO]) {  /* clamped into the box (NaN stays NaN) */
+            const double *lo = EL(RO_LO, i, 0, 0), *hi = EL(RO_HI, i, 0, 0);
+            const ptrdiff_t ls = st[3 * RO_LO + 1], hs = st[3 * RO_HI + 1];
+            for (int a = 0; a < nu; a++) {
+                if (u[a] < lo[a * ls]) u[a] = lo[a * ls];
+                if (u[a] > hi[a * hs]) u[a] = hi[a * hs];
+            }
+        }
         matvec(ndx, ndx, EL(RO_A, i, 0, 0), st[3 * RO_A + 1], st[3 * RO_A + 2], x, xn);
         matvec(ndx, nu, EL(RO_B, i, 0, 0), st[3 * RO_B + 1], st[3 * RO_B + 2], u, w);
         const double *f = EL(RO_F, i, 0, 0);
@@ -1171,5 +1293,7 @@ done:
 #undef chol_solve_vec
 #undef lower_to_upper
 #undef backward
+#undef box_qp
+#undef qp_value
 #undef rollout
 #endif

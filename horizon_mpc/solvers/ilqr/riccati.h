@@ -9,11 +9,11 @@
 
 /* inputs of riccati_backward, in this order */
 enum { IN_A, IN_B, IN_LX, IN_LU, IN_LXX, IN_LUU, IN_LUX, IN_F, IN_LXN, IN_LXXN,
-       IN_PE, IN_PX, IN_Z, IN_FREE, N_IN };
+       IN_PE, IN_PX, IN_Z, IN_FREE, IN_BLO, IN_BHI, N_IN };
 /* outputs of riccati_backward */
 enum { OUT_K, OUT_KFF, OUT_S, OUT_SV, OUT_QU, OUT_QUU, OUT_QUX, N_OUT };
 /* inputs of riccati_rollout */
-enum { RO_A, RO_B, RO_F, RO_K, RO_KFF, RO_DX0, N_RO };
+enum { RO_A, RO_B, RO_F, RO_K, RO_KFF, RO_DX0, RO_LO, RO_HI, N_RO };
 /* inputs of riccati_stack_rows */
 enum { SR_C, SR_BND, SR_CX, SR_CU, SR_CN, SR_BNDN, SR_CXN, SR_A, SR_B, SR_GAP, N_SR };
 

@@ -200,11 +200,16 @@ def _strided(items: list[tuple[str, object, tuple[int, ...]]],
     """Pointers, element strides (n, 3) and the arrays of ``(name, array, shape)`` items.
 
     Arrays are passed as they are when they hold aligned float64 (any view, transposed or
-    not); anything else is converted first. Entries past ``len(items)`` (up to ``n``) are
-    null. Raises ValueError on a wrong shape: the C code trusts the shapes.
+    not); anything else is converted first. None items and entries past ``len(items)`` (up
+    to ``n``) are null. Raises ValueError on a wrong shape: the C code trusts the shapes.
     """
     ptrs, strides, keep = [], [], []
     for name, arr, shape in items:
+        if arr is None:
+            keep.append(np.zeros(1))
+            ptrs.append(None)
+            strides += [0, 0, 0]
+            continue
         a = arr if type(arr) is np.ndarray and arr.dtype == np.float64 else np.asarray(
             arr, dtype=np.float64)
         if a.shape != shape:
@@ -269,7 +274,8 @@ def _sizes(B) -> tuple[int, int, int]:
 
 def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
                     proj: Projection | None = None,
-                    pattern: AbPattern | None = None) -> BackwardResult | None:
+                    pattern: AbPattern | None = None,
+                    box: tuple[np.ndarray, np.ndarray] | None = None) -> BackwardResult | None:
     """Riccati recursion with regularisation ``mu`` on Q_uu, in C; see
     :func:`.riccati.backward_pass` for the maths.
 
@@ -282,6 +288,8 @@ def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
         pattern: the structural nonzeros of [A | B] (None: dense); entries outside it must
             be zero, they are not read. Worth it when sparse: go2's walking dynamics fill
             5 % of it, and a go2 pass (30 nodes) takes 0.68 ms instead of 0.87.
+        box: ``(lo, hi)`` (N, nu) bounds of ``du`` at the nodes without projected rows
+            (:func:`.riccati.box_qp`), or None.
 
     Returns:
         :class:`.riccati.BackwardResult` (K, k, S, s, Qu, Quu, Qux), or None when a (reduced)
@@ -305,7 +313,12 @@ def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
             raise ValueError(f"proj.constrained has shape {con.shape}; expected {(N,)}")
         items += [("proj.P_e", proj.P_e, (N, nu)), ("proj.P_x", proj.P_x, (N, nu, ndx)),
                   ("proj.Z", proj.Z, (N, nu, nu)), ("proj.free", proj.free, (N, nu))]
-    ptrs, strides, _keep = _strided(items, 14)  # without proj: P_e, P_x, Z, free are null
+    else:
+        items += [("proj.P_e", None, ()), ("proj.P_x", None, ()), ("proj.Z", None, ()),
+                  ("proj.free", None, ())]
+    if box is not None:
+        items += [("box lo", box[0], (N, nu)), ("box hi", box[1], (N, nu))]
+    ptrs, strides, _keep = _strided(items, 16)  # without proj or box: their entries are null
     # all outputs in one buffer: one allocation, one pointer per block
     shapes = ((N, nu, ndx), (N, nu), (N + 1, ndx, ndx), (N + 1, ndx), (N, nu), (N, nu, nu),
               (N, nu, ndx))
@@ -331,10 +344,11 @@ def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
     return BackwardResult(*out)
 
 
-def linear_rollout_c(A, B, f, bw: BackwardResult,
-                     dx0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def linear_rollout_c(A, B, f, bw: BackwardResult, dx0: np.ndarray,
+                     box: tuple[np.ndarray, np.ndarray] | None = None,
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """The full step (dX (N+1, ndx), dU (N, nu)) of the LQ sub-problem, in C; see
-    :func:`.riccati.linear_rollout`.
+    :func:`.riccati.linear_rollout` (``box``: (lo, hi) (N, nu) that du is clamped into).
 
     Raises:
         RuntimeError: the compiled library is not available (see :func:`available`).
@@ -344,7 +358,9 @@ def linear_rollout_c(A, B, f, bw: BackwardResult,
     N, ndx, nu = _sizes(B)
     ptrs, strides, _keep = _strided([
         ("A", A, (N, ndx, ndx)), ("B", B, (N, ndx, nu)), ("f", f, (N, ndx)),
-        ("bw.K", bw.K, (N, nu, ndx)), ("bw.k", bw.k, (N, nu)), ("dx0", dx0, (ndx,))], 6)
+        ("bw.K", bw.K, (N, nu, ndx)), ("bw.k", bw.k, (N, nu)), ("dx0", dx0, (ndx,)),
+        *([] if box is None else [("box lo", box[0], (N, nu)), ("box hi", box[1], (N, nu))])],
+        8)
     dX = np.empty((N + 1, ndx))
     dU = np.empty((N, nu))
     if lib.riccati_rollout(N, ndx, nu, ptrs, strides.ctypes.data, dX.ctypes.data,

@@ -85,6 +85,10 @@ class IlqrSolver(Solver):
     ``barrier_mu`` and relaxation slack ``barrier_delta``, in the rows' units: smooth, so
     one iteration per MPC tick does not chatter on the active set, but only approximately
     feasible; see :mod:`.lagrangian`);
+    ``input_bounds``: ``'box'`` (bounds of the inputs kept by the backward pass: a
+    box-constrained QP per node and clamped rollouts, control-limited DDP; at nodes with
+    projected equality rows they go through the augmented Lagrangian) or ``'lagrangian'``
+    (every node's through the augmented Lagrangian, as the other bounds);
     ``line_search``: False takes every full step (the classic real-time iteration of an
     MPC, where the next tick corrects the linearisation error); a step whose evaluation is
     not finite is still rejected.
@@ -113,6 +117,7 @@ class IlqrSolver(Solver):
         "al_max_inner": 10,
         "rti_multiplier_update": True,
         "inequality": "lagrangian",
+        "input_bounds": "lagrangian",
         "barrier_mu": 1.0,
         "barrier_delta": 1.0,
     }
@@ -122,6 +127,9 @@ class IlqrSolver(Solver):
         if self.opts["equality"] not in ("projection", "lagrangian"):
             raise ValueError(f"ilqr option 'equality' must be 'projection' or 'lagrangian', "
                              f"got {self.opts['equality']!r}")
+        if self.opts["input_bounds"] not in ("box", "lagrangian"):
+            raise ValueError(f"ilqr option 'input_bounds' must be 'box' or 'lagrangian', "
+                             f"got {self.opts['input_bounds']!r}")
         self.model = build_stage_model(prb, codegen=bool(self.opts["codegen"]),
                                        projected_equalities=self.opts["equality"] == "projection")
         m = self.model
@@ -189,6 +197,8 @@ class IlqrSolver(Solver):
         self.WrN: np.ndarray | None = None  # (1, nrN)
         self.timings: dict[str, float] = {}
         self._prepared: tuple | None = None  # (evaluation, LQ step, info) of prepare()
+        self._box: tuple[np.ndarray, np.ndarray] | None = None  # see _set_box
+        self._box_du: tuple[np.ndarray, np.ndarray] | None = None  # see _box_step
 
     # ------------------------------------------------------------------ problem data
     def _gather(self) -> None:
@@ -254,6 +264,7 @@ class IlqrSolver(Solver):
             # projected rows leave the augmented Lagrangian
             lb[:, :nc][self._eq_rows], ub[:, :nc][self._eq_rows] = -np.inf, np.inf
             lbN[0, :ncN][self._layout.term], ubN[0, :ncN][self._layout.term] = -np.inf, np.inf
+        self._set_box(lb, ub, ulb, uub)
         self._al.set_bounds(lb, ub)
         self._alN.set_bounds(lbN, ubN)
         self._choose_quadratisation(lb[:, :m.nc_con], ub[:, :m.nc_con])
@@ -266,6 +277,44 @@ class IlqrSolver(Solver):
                 self.S, self.P, lay.b, self._eq_rows, lay.bN, lay.term,
                 None if weights[0] is self.Wr and weights[1] is self.WrN
                 else (self.Wr, self.WrN[0]))
+
+    def _set_box(self, lb: np.ndarray, ub: np.ndarray, ulb: np.ndarray,
+                 uub: np.ndarray) -> None:
+        """The input bounds the backward pass keeps (option ``input_bounds='box'``): those
+        of the nodes without projected rows, taken out of the augmented-Lagrangian bounds
+        ``lb``, ``ub`` (N, nc) in place; ``self._box`` = their (lower, upper) (N, nu),
+        infinite elsewhere, or None. The guess's inputs are clipped into them (the steps
+        then stay inside). ``ulb``, ``uub``: (nu, N) input bounds."""
+        self._box = None
+        m, N = self.model, self.model.n_nodes
+        if self.opts["input_bounds"] != "box" or not m.nu:
+            return
+        finite = np.isfinite(ulb) | np.isfinite(uub)
+        if not finite.any():
+            return
+        lay = self._layout
+        projected = lay.own.any(axis=1) | lay.next.any(axis=1)
+        projected[-1] |= bool(lay.term.any())
+        nodes = finite.any(axis=0) & ~projected
+        if not nodes.any():
+            return
+        box_lb = np.where(nodes[:, None], ulb.T, -np.inf)
+        box_ub = np.where(nodes[:, None], uub.T, np.inf)
+        lb[nodes, -m.nu:], ub[nodes, -m.nu:] = -np.inf, np.inf
+        self._box = (box_lb, box_ub)
+        np.clip(self.U, box_lb, box_ub, out=self.U)
+
+    def _box_step(self) -> bool:
+        """The box of the step ``du`` at the current inputs, where the LQ step reads it
+        (the compiled one's arrays, or ``self._box_du``); whether there is one."""
+        if self._box is None:
+            return False
+        lo, hi = (self._lq.box_lo, self._lq.box_hi) if self._lq is not None else (
+            np.empty_like(self.U), np.empty_like(self.U))
+        np.subtract(self._box[0], self.U, out=lo)
+        np.subtract(self._box[1], self.U, out=hi)
+        self._box_du = (lo, hi)
+        return True
 
     def _weights(self) -> tuple[np.ndarray, np.ndarray]:
         """The residual weights per node, Wr (N, nr) and WrN (1, nrN) (0 where inactive)."""
@@ -362,6 +411,10 @@ class IlqrSolver(Solver):
             fixed = float(np.max(np.maximum(lb - c0, c0 - ub), initial=0.0))
         eq = max(gap_max, eq_max)
         free = max(eq, al_viol)
+        if self._box is not None:  # the input bounds the backward pass keeps
+            u = c[:, -self.model.nu:]
+            free = max(free, float(np.max(np.maximum(self._box[0] - u, u - self._box[1]),
+                                          initial=0.0)))
         return {"viol_eq": eq, "viol_free": free, "viol_fixed": fixed, "viol": max(free, fixed)}
 
     def _merit(self, ev: dict[str, Any], nu: float) -> float:
@@ -427,6 +480,7 @@ class IlqrSolver(Solver):
             info["status_nan"] = 1.0
             return None
         proj, lq = None, self._lq
+        box = self._box_step()
         if self._layout.any:
             if lq is not None:
                 proj = lq.project(self._layout, ev["c"], ev["cN"][0], ev["gap"])
@@ -437,10 +491,11 @@ class IlqrSolver(Solver):
             info["rank_deficient_nodes"] = float(proj.rank_deficient)
         while True:
             if lq is not None:
-                bw = lq.backward(ev["gap"], self.mu, proj)
+                bw = lq.backward(ev["gap"], self.mu, proj, box)
             else:
                 bw = self._backward(q["A"], q["B"], q["lx"], q["lu"], q["lxx"], q["luu"],
-                                    q["lux"], ev["gap"], q["lxN"], q["lxxN"], self.mu, proj)
+                                    q["lux"], ev["gap"], q["lxN"], q["lxxN"], self.mu, proj,
+                                    box=self._box_du if box else None)
             if bw is not None:
                 self._time("backward", time.perf_counter() - t1)
                 return q, proj, bw
@@ -474,10 +529,11 @@ class IlqrSolver(Solver):
         # linearly) and the largest multiplier estimate (costates and, with a projection, the
         # projected rows' multipliers), which the l1 merit weight stays above
         if self._lq is not None:
-            dX, dU, (slope, lam_max, dx_max, du_max) = self._lq.rollout(ev["gap"], bw, dx0,
-                                                                        proj)
+            dX, dU, (slope, lam_max, dx_max, du_max) = self._lq.rollout(
+                ev["gap"], bw, dx0, proj, self._box is not None)
         else:
-            dX, dU = self._rollout(q["A"], q["B"], ev["gap"], bw, dx0)
+            dX, dU = self._rollout(q["A"], q["B"], ev["gap"], bw, dx0,
+                                   box=None if self._box is None else self._box_du)
             slope, lam_max, dx_max, du_max = self._step_stats(
                 q["lx"], q["lu"], q["lxN"], bw.s, bw.S, bw.Qu, bw.Quu, bw.Qux, dX, dU,
                 None if proj is None else proj.pinv)

@@ -1,0 +1,175 @@
+"""ILQR with box-constrained inputs (option ``input_bounds='box'``): the box QP, the
+backward pass and rollout in numpy and C, and a receding horizon whose input bound is
+active."""
+
+import casadi as cs
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from horizon_mpc import Problem, make_solver
+from horizon_mpc.examples import pendulum_dynamics
+from horizon_mpc.solvers.ilqr import riccati, riccati_c
+
+
+def _qp_reference(H, q, lo, hi):
+    res = minimize(lambda z: 0.5 * z @ H @ z + q @ z, np.clip(np.zeros(len(q)), lo, hi),
+                   jac=lambda z: H @ z + q, bounds=list(zip(lo, hi, strict=True)),
+                   method="L-BFGS-B", options={"ftol": 1e-15, "gtol": 1e-13, "maxiter": 1000})
+    return res.x
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_box_qp_matches_a_bounded_quasi_newton_reference(seed):
+    rng = np.random.default_rng(seed)
+    n = 5
+    L = rng.standard_normal((n, n))
+    H = L @ L.T + 0.1 * np.eye(n)
+    q = 3.0 * rng.standard_normal(n)
+    lo, hi = -rng.uniform(0.0, 1.0, n), rng.uniform(0.0, 1.0, n)
+    lo[0], hi[1] = -np.inf, np.inf  # one-sided and unbounded inputs too
+    x, free, chol = riccati.box_qp(H, q, lo, hi)
+    np.testing.assert_allclose(x, _qp_reference(H, q, lo, hi), atol=1e-6)
+    assert np.all(x >= lo) and np.all(x <= hi)
+    g = H @ x + q
+    # KKT: stationary on the free inputs, the gradient pushes the clamped ones outwards
+    np.testing.assert_allclose(g[free], 0.0, atol=1e-10)
+    assert np.all(((x <= lo) & (g >= 0)) | ((x >= hi) & (g <= 0)) | free)
+    assert (chol is None) == (not free.any())
+
+
+def test_box_qp_keeps_fixed_inputs_and_refuses_an_indefinite_free_block():
+    H, q = np.eye(2), np.array([1.0, -1.0])
+    x, free, _ = riccati.box_qp(H, q, np.array([0.3, -1.0]), np.array([0.3, 1.0]))
+    np.testing.assert_allclose(x, [0.3, 1.0])  # input 0 fixed; input 1 at the unconstrained 1
+    assert free.tolist() == [False, True]
+    assert riccati.box_qp(-np.eye(2), np.zeros(2), -np.ones(2), np.ones(2)) is None
+
+
+def _lq_data(seed, N=6, ndx=5, nu=3):
+    rng = np.random.default_rng(seed)
+    A = np.eye(ndx) + 0.1 * rng.standard_normal((N, ndx, ndx))
+    B = rng.standard_normal((N, ndx, nu))
+    L = rng.standard_normal((N, ndx + nu, ndx + nu))
+    H = np.einsum("kij,kil->kjl", L, L) + 0.1 * np.eye(ndx + nu)
+    lo, hi = np.full((N, nu), -0.3), np.full((N, nu), 0.2)
+    if N > 3:
+        lo[2], hi[2] = -np.inf, np.inf  # a node without box: the plain recursion
+        lo[3, 1] = hi[3, 1] = 0.05  # a fixed input
+    args = (A, B, rng.standard_normal((N, ndx)), 5.0 * rng.standard_normal((N, nu)),
+            H[:, :ndx, :ndx].copy(), H[:, ndx:, ndx:].copy(), H[:, ndx:, :ndx].copy(),
+            0.1 * rng.standard_normal((N, ndx)), rng.standard_normal(ndx), np.eye(ndx), 1e-8)
+    return args, (lo, hi), rng.standard_normal(ndx)
+
+
+@pytest.mark.skipif(not riccati_c.available(), reason="no C compiler")
+@pytest.mark.parametrize("seed", range(3))
+def test_compiled_box_backward_and_rollout_match_numpy(seed):
+    args, box, dx0 = _lq_data(seed)
+    bn = riccati.backward_pass(*args, box=box)
+    bc = riccati_c.backward_pass_c(*args, box=box)
+    for name in ("K", "k", "S", "s"):
+        np.testing.assert_allclose(getattr(bc, name), getattr(bn, name), atol=1e-10)
+    A, B, f = args[0], args[1], args[7]
+    Xn, Un = riccati.linear_rollout(A, B, f, bn, dx0, box=box)
+    Xc, Uc = riccati_c.linear_rollout_c(A, B, f, bc, dx0, box=box)
+    np.testing.assert_allclose(Xc, Xn, atol=1e-10)
+    np.testing.assert_allclose(Uc, Un, atol=1e-10)
+    lo, hi = box
+    assert np.all(Un >= lo) and np.all(Un <= hi)
+    assert np.abs(Un[2]).max() > 0.3  # the node without a box is not clamped
+
+
+def test_box_value_function_is_the_cost_to_go_of_the_clamped_policy():
+    """One node: S, s of the box pass equal the Q-function evaluated along du = K dx + k."""
+    args, box, _ = _lq_data(1, N=1)
+    A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu = args
+    bw = riccati.backward_pass(*args, box=box)
+    g = lxN + lxxN @ f[0]
+    Qx, Qu = lx[0] + A[0].T @ g, lu[0] + B[0].T @ g
+    Qxx = lxx[0] + A[0].T @ lxxN @ A[0]
+    Quu = luu[0] + B[0].T @ lxxN @ B[0] + mu * np.eye(B.shape[2])
+    Qux = lux[0] + B[0].T @ lxxN @ A[0]
+    K, k = bw.K[0], bw.k[0]
+    S = Qxx + K.T @ Quu @ K + K.T @ Qux + Qux.T @ K
+    np.testing.assert_allclose(bw.S[0], 0.5 * (S + S.T), atol=1e-10)
+    np.testing.assert_allclose(bw.s[0], Qx + K.T @ (Quu @ k + Qu) + Qux.T @ k, atol=1e-10)
+
+
+def _pendulum_mpc(u_max=4.0, N=30):
+    prb = Problem(N)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    ref = prb.create_parameter("ref", 1)
+    prb.set_dynamics(cs.vertcat(x[1], pendulum_dynamics(x[0], x[1], u)))
+    prb.set_dt(0.05)
+    u.set_bounds(-u_max, u_max)
+    prb.create_cost("track", x[0] - ref, weight=5.0)
+    prb.create_cost("velocity", x[1], weight=0.1)
+    prb.create_cost("effort", u, weight=0.01)
+    return prb, x, ref
+
+
+@pytest.mark.slow
+def test_receding_horizon_with_an_active_input_bound_converges_on_every_tick():
+    """25 ticks of a pendulum MPC whose torque limit is active at the steps of the
+    reference: with the box every solve converges to IPOPT's optimum (with the augmented
+    Lagrangian, 4 of these 25 ended at max_iter)."""
+    u_max = 4.0
+    prb, x, ref = _pendulum_mpc(u_max)
+    ilqr = make_solver("ilqr", prb, {"input_bounds": "box", "max_iter": 100})
+    F = prb.discrete_dynamics()
+    state, active = np.zeros(2), 0
+    for t in range(25):
+        r = 0.8 if t < 12 else -0.5
+        x.set_bounds(state, state, nodes=0)
+        ref.assign(r)
+        assert ilqr.solve(), (t, ilqr.stats.status)
+        assert ilqr.stats.iterations <= 15
+        u = ilqr.solution["u"]
+        assert np.abs(u).max() <= u_max + 1e-12
+        active += int(np.isclose(np.abs(u).max(), u_max))
+        cold, xc, rc = _pendulum_mpc(u_max)
+        xc.set_bounds(state, state, nodes=0)
+        xc.set_initial_guess(state[:, None])
+        rc.assign(r)
+        ipopt = make_solver("ipopt", cold)
+        assert ipopt.solve()
+        assert abs(ilqr.stats.cost - ipopt.stats.cost) <= 1e-6 * ipopt.stats.cost
+        state = F(state, u[:, 0], [], []).full().ravel()
+        ilqr.shift()
+    assert active >= 5  # the bound mattered
+
+
+def test_every_real_time_iterate_stays_within_the_input_bounds():
+    prb, x, ref = _pendulum_mpc(2.0)
+    x.set_bounds([0.5, 0.0], [0.5, 0.0], nodes=0)
+    ref.assign(-0.8)
+    prb.inputs[0].set_initial_guess(np.full((1, 30), 3.0))  # outside: clipped into the box
+    solver = make_solver("ilqr", prb, {"input_bounds": "box", "rti": True})
+    for _ in range(5):
+        solver.solve()
+        u = solver.solution["u"]
+        assert np.abs(u).max() <= 2.0 + 1e-12
+        prb.inputs[0].set_initial_guess(u)
+    assert np.isclose(np.abs(u).max(), 2.0)  # the bound is active
+
+
+@pytest.mark.skipif(not riccati_c.available(), reason="no C compiler")
+def test_compiled_and_numpy_box_solves_agree():
+    sols = []
+    for codegen in (False, True):
+        prb, x, ref = _pendulum_mpc(3.0)
+        x.set_bounds([0.0, 0.0], [0.0, 0.0], nodes=0)
+        ref.assign(1.0)
+        solver = make_solver("ilqr", prb, {"input_bounds": "box", "codegen": codegen})
+        assert solver.solve()
+        sols.append((solver.stats.iterations, solver.solution["u"]))
+    assert sols[0][0] == sols[1][0]
+    np.testing.assert_allclose(sols[0][1], sols[1][1], atol=1e-8)
+
+
+def test_input_bounds_option_is_checked():
+    prb, _, _ = _pendulum_mpc()
+    with pytest.raises(ValueError, match="input_bounds"):
+        make_solver("ilqr", prb, {"input_bounds": "clip"})
