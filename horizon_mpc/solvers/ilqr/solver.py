@@ -286,7 +286,7 @@ class IlqrSolver(Solver):
         infinite elsewhere, or None. The guess's inputs are clipped into them (the steps
         then stay inside). ``ulb``, ``uub``: (nu, N) input bounds."""
         self._box = None
-        m, N = self.model, self.model.n_nodes
+        m = self.model
         if self.opts["input_bounds"] != "box" or not m.nu:
             return
         finite = np.isfinite(ulb) | np.isfinite(uub)
