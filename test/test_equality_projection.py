@@ -305,3 +305,25 @@ def test_unknown_method_is_refused():
     layout, args = _problem(N=3)
     with pytest.raises(ValueError, match="'lu'.*'qr', 'qr-numpy', 'svd'"):
         project(layout, *args, method="lu")
+
+
+def test_a_row_the_input_moves_only_by_round_off_is_dropped():
+    """An input row scaled to round-off (1e-19, state Jacobian 1e-16: a unit-quaternion row
+    under a norm-preserving integrator) is not projected (its P_x would be C / D ~ 1e3):
+    the node's projection is the one without that row. Its only row: no other row to
+    compare it with (a relative rank test keeps it)."""
+    layout, args = _problem(N=9, seed=4)
+    node = int(np.flatnonzero(layout.own.sum(axis=1) >= 1)[0])
+    layout.own[node] = False
+    col = 0
+    layout.own[node, col] = True
+    layout.next[node] = False
+    args[2][node, col] *= 1e-19
+    args[1][node, col] *= 1e-16
+    args[0][node, col] = layout.b[node, col]  # the row holds (as the unit norm does)
+    qr = project(layout, *args)
+    layout.own[node, col] = False
+    without = project(layout, *args)
+    for name in ("P_e", "P_x", "free"):
+        assert _close(getattr(qr, name)[node], getattr(without, name)[node]), name
+    assert qr.rank_deficient == 0  # the dropped row is met: its target holds

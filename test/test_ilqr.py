@@ -467,3 +467,57 @@ def test_a_failed_prepare_does_not_keep_the_last_solves_success():
     prb.get_variable("u").set_initial_guess(np.nan, nodes=2)
     assert not solver.prepare()
     assert solver.stats.success is False and solver.stats.status.startswith("prepare:")
+
+
+def _quat_mul(a, b):
+    ax, ay, az, aw = a[0], a[1], a[2], a[3]
+    bx, by, bz, bw = b[0], b[1], b[2], b[3]
+    return cs.vertcat(aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                      aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+
+
+def _quat_manifold():
+    q, q1, d = cs.SX.sym("q", 4), cs.SX.sym("q1", 4), cs.SX.sym("d", 3)
+    n2 = cs.dot(d, d)
+    n = cs.sqrt(cs.fmax(n2, 1e-12))
+    half = cs.if_else(n2 < 1e-12, 0.5 - n2 / 48, cs.sin(n / 2) / n)
+    exp = cs.vertcat(half * d, cs.if_else(n2 < 1e-12, 1 - n2 / 8, cs.cos(n / 2)))
+    r = _quat_mul(cs.vertcat(-q[:3], q[3]), q1)
+    s = cs.if_else(r[3] < 0, -1, 1)
+    v, w = s * r[:3], s * r[3]
+    m2 = cs.dot(v, v)
+    m = cs.sqrt(cs.fmax(m2, 1e-12))
+    log = cs.if_else(m2 < 1e-12, 2 / w, 2 * cs.atan2(m, w) / m) * v
+    return (cs.Function("integrate", [q, d], [_quat_mul(q, exp)]),
+            cs.Function("difference", [q, q1], [log]))
+
+
+@pytest.mark.parametrize("codegen", [False, True])
+def test_unit_quaternion_rows_under_a_norm_preserving_integrator_converge(codegen):
+    """A state-only unit-norm row on a quaternion integrated on its manifold: its input
+    Jacobian through the dynamics is round-off (1e-20), and projecting it gave P_x ~ 1e3:
+    max_iter with mu 1e10. Now dropped from the projection: IPOPT's optimum."""
+    integrate, difference = _quat_manifold()
+    target = np.array([0.5, 0.5, 0.5, 0.5])
+
+    def build():
+        prb = Problem(40)
+        tau = prb.create_input_variable("tau", 3)
+        w = prb.create_state_variable("w", 3)
+        q = prb.create_state_variable("q", 4)
+        q.set_manifold(integrate, difference, 3)
+        prb.set_dynamics(cs.vertcat(tau, w))
+        prb.set_dt(0.05)
+        q.set_bounds([0, 0, 0, 1], [0, 0, 0, 1], nodes=0)
+        w.set_bounds(0, 0, nodes=0)
+        q.set_initial_guess([0, 0, 0, 1.0])
+        prb.create_cost("effort", tau, weight=0.01)
+        prb.create_constraint("unit", cs.dot(q, q) - 1, nodes=range(1, 41))
+        prb.create_final_constraint("goal", difference(cs.DM(target), q))
+        prb.create_final_constraint("rest", w)
+        return prb
+
+    ok_i, ipopt = _solve(build(), "ipopt")
+    ok_l, ilqr = _solve(build(), "ilqr", {**OPTS, "codegen": codegen, "max_iter": 100})
+    assert ok_i and ok_l, ilqr.stats.status
+    assert abs(ilqr.stats.cost - ipopt.stats.cost) <= 1e-6 * ipopt.stats.cost

@@ -33,6 +33,7 @@
 #include "riccati.h"  /* the entry points and their argument orders */
 
 #define BOX_QP_MAX_ITER 100  /* riccati.py's */
+#define INPUT_ATOL 1e-13  /* equality.py's */
 #define NB 4  /* rows per block of the Cholesky factorisation and solves (= the tile rows) */
 
 /* doubles of workspace of riccati_backward */
@@ -1117,6 +1118,16 @@ static int project(int N, int m, int nu, int ndx, const double *W, const uint8_t
             continue;
         }
 #define WROW(j) (W + ((size_t)i * m + slot[j]) * ld)
+        /* a row whose input Jacobian is round-off next to its state Jacobian (equality.py's
+         * INPUT_ATOL) leaves the node to the SVD, which drops it */
+        for (int j = 0; j < c && ok[i]; j++) {
+            const double *wj = WROW(j);
+            double dmax = 0.0, cmax = 1.0;
+            for (int p = 0; p < nu; p++) dmax = fmax(dmax, fabs(wj[p]));
+            for (int r = 0; r < ndx; r++) cmax = fmax(cmax, fabs(wj[nu + r]));
+            if (!(dmax > INPUT_ATOL * cmax)) ok[i] = 0;  /* NaN: not ok */
+        }
+        if (!ok[i]) continue;
         /* pinned rows: one nonzero in D, in a column no earlier pinned row has (a zero
          * force, d_k f_p = ...): they fix du_p = -(C dx + e) / d_k, and the other rows see
          * them eliminated. The minimum-norm solution, hence D^+, P_e, P_x and the null
