@@ -173,3 +173,39 @@ def test_input_bounds_option_is_checked():
     prb, _, _ = _pendulum_mpc()
     with pytest.raises(ValueError, match="input_bounds"):
         make_solver("ilqr", prb, {"input_bounds": "clip"})
+
+
+def _coupled_inputs():
+    """Linear dynamics, quadratic cost, linear constraints (one optimum): two input
+    variables with bounds active at the optimum, an input equality (projected) on nodes
+    5-11, where the bounds stay with the augmented Lagrangian."""
+    prb = Problem(20)
+    x = prb.create_state_variable("x", 2)
+    v = prb.create_state_variable("v", 2)
+    a = prb.create_input_variable("a", 1)
+    b = prb.create_input_variable("b", 2)
+    prb.set_dynamics(cs.vertcat(v, a[0] + b[0], b[1] - 0.5 * a[0]))
+    prb.set_dt(0.05)
+    x.set_bounds([0, 0], [0, 0], nodes=0)
+    v.set_bounds([0, 0], [0, 0], nodes=0)
+    prb.create_cost("goal", x - np.array([1.0, -0.7]), weight=10.0)
+    prb.create_cost("velocity", v, weight=0.1)
+    prb.create_cost("effort_a", a, weight=0.01)
+    prb.create_cost("effort_b", b, weight=0.02)
+    a.set_bounds(-0.4, 0.4)
+    b.set_bounds(-0.5, 0.5)
+    prb.create_constraint("couple", a[0] - b[1], nodes=range(5, 12))
+    return prb
+
+
+def test_converged_means_complementary_multipliers_too():
+    """The box solve stopped here once, 'converged' 1.1e-4 above IPOPT's optimum: stationary
+    and feasible, but with the bounds of the projected nodes 1.3e-3 short of active while
+    their multipliers pressed them away."""
+    ipopt = make_solver("ipopt", _coupled_inputs())
+    assert ipopt.solve()
+    ilqr = make_solver("ilqr", _coupled_inputs(), {"input_bounds": "box", "max_iter": 100})
+    assert ilqr.solve(), ilqr.stats.status
+    assert abs(ilqr.stats.cost - ipopt.stats.cost) <= 1e-7 * ipopt.stats.cost
+    for name in ("a", "b"):
+        np.testing.assert_allclose(ilqr.solution[name], ipopt.solution[name], atol=1e-5)

@@ -145,6 +145,22 @@ class AugmentedLagrangian:
         np.maximum(v, 0.0, out=v)
         return v
 
+    def complementarity(self, c: np.ndarray) -> float:
+        """The largest ``|max(c - ub, -lam_up / rho)|`` (and its lower-side mirror) over the
+        inequality rows: zero at a KKT point of the rows, where a row pressed by its
+        multiplier sits on its bound; the primal violation where a row is past it (0 for
+        barrier rows: they carry no multiplier). The augmented Lagrangian's stationary
+        points with multipliers that press rows away from their bounds fail it."""
+        if self.barrier:
+            return 0.0
+        worst = 0.0
+        for side, mask, lam, gap in ((1.0, self.has_up, self.lam_up, c - self.ub),
+                                     (-1.0, self.has_lo, self.lam_lo, self.lb - c)):
+            if mask.any():
+                v = np.maximum(gap[mask], -lam[mask] / self.rho[mask])
+                worst = max(worst, float(np.max(np.abs(v))))
+        return worst
+
     def _barrier_terms(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Barrier value, dB/dc and d2B/dc2 of the barrier sides, flat (upper sides, then
         lower sides: index ``self._iu``, ``self._il`` into ``c.ravel()``)."""
