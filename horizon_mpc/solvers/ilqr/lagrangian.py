@@ -154,8 +154,8 @@ class AugmentedLagrangian:
         if self.barrier:
             return 0.0
         worst = 0.0
-        for side, mask, lam, gap in ((1.0, self.has_up, self.lam_up, c - self.ub),
-                                     (-1.0, self.has_lo, self.lam_lo, self.lb - c)):
+        for mask, lam, gap in ((self.has_up, self.lam_up, c - self.ub),
+                               (self.has_lo, self.lam_lo, self.lb - c)):
             if mask.any():
                 v = np.maximum(gap[mask], -lam[mask] / self.rho[mask])
                 worst = max(worst, float(np.max(np.abs(v))))
