@@ -22,7 +22,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -55,6 +55,7 @@ from horizon_mpc.nodes.mpc_process import (
     MpcProcess,
     MpcProcessError,
     TickRecord,
+    private_domain_id,
     process_cpu_seconds,
     process_memory_mb,
     wait_until,
@@ -73,6 +74,7 @@ HOLD_PERIOD = 0.25
 #: Hz (sim) of the simulator's states in real time (sim_node's default is 500): measured on
 #: go2, the same plan age and ticks per second, ~0.1 core less in each process
 REALTIME_STATE_RATE = 250.0
+MAX_DOMAIN_ID = 232  # the largest ROS_DOMAIN_ID whose ports fit on Linux
 
 
 @dataclass
@@ -103,6 +105,10 @@ class Recording:
     build_time: float = math.nan  # s (wall) until the MPC could tick (realtime: 1st plan)
     mpc_process: dict = field(default_factory=dict)  # realtime: pid, memory, CPU, exit code
     mpc_log: str = ""  # realtime: the end of the MPC process's output
+    domain_id: int | None = None  # the run's ROS_DOMAIN_ID
+    # other nodes heard publishing the loop's topics ("joint_trajectory: 2 publishers, 1
+    # expected"): the run was not isolated, its figures may mix in theirs
+    foreign_publishers: list[str] = field(default_factory=list)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The per-period lists as arrays (rows = time)."""
@@ -125,9 +131,15 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
 
     ``mpc_parameters``: more ``mpc_node`` parameters (name -> value).
 
-    Real-time mode only (``doc/closed_loop.md``): ``domain_id`` is the ``ROS_DOMAIN_ID`` of
-    the run (default: the environment's, else a private one derived from this process id,
-    :func:`~horizon_mpc.nodes.mpc_process.default_domain_id`); ``mpc_command`` replaces ``python -m
+    ``domain_id``: the ``ROS_DOMAIN_ID`` of the run; default in lockstep a private one
+    derived from this process id (:func:`~horizon_mpc.nodes.mpc_process.private_domain_id`:
+    parallel runs, and nodes on the environment's domain, do not hear it), in real time the
+    environment's, else that private one
+    (:func:`~horizon_mpc.nodes.mpc_process.default_domain_id`). Either way other publishers
+    of the loop's topics are looked for once per sim second and reported
+    (``Recording.foreign_publishers``).
+
+    Real-time mode only (``doc/closed_loop.md``): ``mpc_command`` replaces ``python -m
     horizon_mpc.nodes.mpc_node`` as the MPC process's program (a benchmark's wrapper);
     ``ready_timeout`` (s, wall) bounds the wait for the MPC process's readiness and for its
     first plan. Raises :class:`~horizon_mpc.nodes.mpc_process.MpcProcessError` (with the end
@@ -141,7 +153,8 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
     cfg = load_robot_config(robot)  # an unknown robot fails here, before any node or process
     loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
     if mode == "lockstep":
-        rec = _run_lockstep(robot, iterations, loop, mpc_parameters)
+        rec = _run_lockstep(robot, iterations, loop, mpc_parameters,
+                            private_domain_id() if domain_id is None else domain_id)
     else:
         rec = _run_realtime(robot, iterations, loop, domain_id, mpc_parameters, mpc_command,
                             ready_timeout)
@@ -203,15 +216,34 @@ class _Loop:
             self.fell_at is not None and t - self.fell_at >= self.stop_after_fall)
 
 
+# the loop's topics and how many publishers each has in the loop itself
+_LOOP_PUBLISHERS = {"joint_trajectory": 1, "joint_states": 1, "odom": 1, "cmd_vel": 1}
+
+
+def _foreign_publishers(node: Node, rec: Recording) -> None:
+    """Add to ``rec.foreign_publishers`` (and log once) the loop's topics that have more
+    publishers than the loop's own: another node on the run's domain."""
+    for topic, own in _LOOP_PUBLISHERS.items():
+        n = node.count_publishers(topic)
+        note = f"{topic}: {n} publishers, {own} expected"
+        if n > own and note not in rec.foreign_publishers:
+            rec.foreign_publishers.append(note)
+            log.warning("another node publishes on this run's domain (ROS_DOMAIN_ID %s): %s;"
+                        " the run is not isolated (use another --domain-id)", rec.domain_id,
+                        note)
+
+
 def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
-                  mpc_parameters: Mapping[str, object] | None = None) -> Recording:
+                  mpc_parameters: Mapping[str, object] | None, domain_id: int) -> Recording:
     """One process, one executor: the simulator waits for each plan (deterministic)."""
     ctx = rclpy.Context()
     # Ctrl-C: KeyboardInterrupt in this thread (see _run_realtime)
     # args=[]: the process's ROS arguments (a launch file's '-r __node:=closed_loop') would
     # rename every node of the loop alike
-    rclpy.init(args=[], context=ctx, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(args=[], context=ctx, domain_id=domain_id,
+               signal_handler_options=SignalHandlerOptions.NO)
     rec = loop.rec
+    rec.domain_id = domain_id
     try:
         t_build = time.perf_counter()
         mpc = MpcNode(context=ctx, parameter_overrides=[
@@ -237,22 +269,38 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
         last_rec_ns = -1
         wall0 = time.perf_counter()
         ticks_seen = 0
+        check_ns = 0
+
+        def record_ticks() -> bool:
+            nonlocal ticks_seen
+            if mpc.ticks == ticks_seen:
+                return False
+            ticks_seen = mpc.ticks
+            rec.tick_t.append(mpc.plan.t0)
+            rec.tick_time.append(mpc.last_solve_time)
+            rec.prepare_time.append(mpc.last_prepare_time)
+            rec.tick_iterations.append(mpc.plan.stats.get("iterations", math.nan))
+            rec.plan_t.append(mpc.plan.t0)
+            rec.plan_age.append(sim.now_ns / 1e9 - mpc.plan.t0)
+            return True
+
         while True:
             executor.spin_once(timeout_sec=0.05)
             now_ns = sim.now_ns
-            if mpc.ticks > ticks_seen:
-                ticks_seen = mpc.ticks
-                rec.tick_t.append(mpc.plan.t0)
-                rec.tick_time.append(mpc.last_solve_time)
-                rec.prepare_time.append(mpc.last_prepare_time)
-                rec.tick_iterations.append(mpc.plan.stats.get("iterations", math.nan))
-                rec.plan_t.append(mpc.plan.t0)
-                rec.plan_age.append(now_ns / 1e9 - mpc.plan.t0)
+            record_ticks()
+            if now_ns >= check_ns:  # once per sim second
+                check_ns = now_ns + 1_000_000_000
+                _foreign_publishers(player, rec)
             if now_ns - last_rec_ns < dt_ns and last_rec_ns >= 0:
                 continue
             last_rec_ns = now_ns
             if loop.period(sim, now_ns / 1e9, dt, pub_cmd, mpc.mpc.cmd, render=True):
                 break
+        # the tick on the last recorded state (the sim waits for its plan: it comes within
+        # a few spins; the run's tick count then covers every recorded period)
+        deadline = time.perf_counter() + 5.0
+        while time.perf_counter() < deadline and not record_ticks():
+            executor.spin_once(timeout_sec=0.05)
         rec.wall_time = time.perf_counter() - wall0
         rec.deadline_misses = mpc.deadline_misses
         rec.stale_skips = mpc.stale_skips
@@ -278,6 +326,7 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
     dt = control_period(robot)
     t_start = time.perf_counter()
     with MpcProcess(robot, iterations, domain_id, mpc_parameters, mpc_command) as child:
+        rec.domain_id = child.domain_id
         ctx = rclpy.Context()
         # Ctrl-C is Python's KeyboardInterrupt here, raised in this thread (rclpy's handlers
         # would shut the context down from a thread of their own): the cleanup below runs
@@ -300,7 +349,8 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
             rec.build_time = time.perf_counter() - t_start
             executor.add_node(sim)
             cpu0 = (time.process_time(), process_cpu_seconds(child.pid))
-            rec.wall_time = _realtime_loop(executor, sim, monitor, child, pub_cmd, dt, loop)
+            rec.wall_time = _realtime_loop(executor, sim, monitor, child, pub_cmd, dt, loop,
+                                           lambda: _foreign_publishers(player, rec))
             rec.mpc_process = {
                 "pid": child.pid, "domain_id": child.domain_id,
                 "memory_mb": process_memory_mb(child.pid),
@@ -345,10 +395,12 @@ def _wait_for_first_plan(executor: SingleThreadedExecutor, sim: SimNode, monitor
 
 
 def _realtime_loop(executor: SingleThreadedExecutor, sim: SimNode, monitor: MpcMonitor,
-                   child: MpcProcess, pub_cmd: Publisher, dt: float, loop: _Loop) -> float:
-    """Spin until the run is over, recording every control period; returns the wall time."""
+                   child: MpcProcess, pub_cmd: Publisher, dt: float, loop: _Loop,
+                   check_isolation: Callable[[], None]) -> float:
+    """Spin until the run is over, recording every control period (and calling
+    ``check_isolation`` once per sim second); returns the wall time."""
     dt_ns = round(dt * 1e9)
-    start_ns = next_ns = sim.now_ns
+    start_ns = next_ns = check_ns = sim.now_ns
     wall0 = time.perf_counter()
     while True:
         executor.spin_once(timeout_sec=0.05)
@@ -357,6 +409,9 @@ def _realtime_loop(executor: SingleThreadedExecutor, sim: SimNode, monitor: MpcM
             continue
         next_ns = start_ns + ((now_ns - start_ns) // dt_ns + 1) * dt_ns  # the next period
         child.check_alive("during the run")
+        if now_ns >= check_ns:
+            check_ns = now_ns + 1_000_000_000
+            check_isolation()
         if loop.period(sim, now_ns / 1e9, dt, pub_cmd, monitor.record.command, render=False):
             return time.perf_counter() - wall0
 
@@ -400,6 +455,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="ILQR iterations per tick (default: the robot config's mpc.iterations)")
     ap.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
                     help="render a GIF (every 50 ms of sim time)")
+    ap.add_argument("--domain-id", type=int, default=None,
+                    help="ROS_DOMAIN_ID of the run (default: lockstep a private one from "
+                    "the process id; realtime the environment's, else that private one)")
     ap.add_argument("-p", "--mpc-param", action="append", default=[], metavar="NAME=VALUE",
                     help="an mpc_node parameter (YAML value), e.g. -p prepare_ahead=true; "
                     "repeatable")
@@ -423,7 +481,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, profile)
     try:
         rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
-                  pushes=pushes, mpc_parameters=mpc_parameters)
+                  pushes=pushes, mpc_parameters=mpc_parameters, domain_id=args.domain_id)
     except MpcProcessError as exc:
         log.error("%s", exc)
         return 1
@@ -462,6 +520,9 @@ def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, li
                          f"{args.duration}")
     if args.iterations is not None and args.iterations < 1:
         raise ValueError(f"--iterations must be >= 1, got {args.iterations}")
+    if args.domain_id is not None and not 0 <= args.domain_id <= MAX_DOMAIN_ID:
+        raise ValueError(f"--domain-id must be in 0..{MAX_DOMAIN_ID} (ROS 2 on Linux), got "
+                         f"{args.domain_id}")
     segments = load_profile(profile)
     pushes = load_pushes(profile)
     end = args.duration if args.duration is not None else sum(s.duration for s in segments)

@@ -143,6 +143,8 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
         **ticks,
         "stale_skips": rec.stale_skips,
         "mpc_process": rec.mpc_process,
+        "domain_id": rec.domain_id,
+        "foreign_publishers": list(rec.foreign_publishers),
         "gif_frames": len(rec.frames),
     }
 

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import rclpy
+from geometry_msgs.msg import Twist
 from processes import process_exists
 
 from horizon_mpc.closed_loop import (
@@ -24,10 +26,11 @@ from horizon_mpc.closed_loop import (
     command_at,
     load_profile,
     load_pushes,
+    main,
     run,
 )
 from horizon_mpc.closed_loop_report import roll_pitch_yaw, summarise, write_report
-from horizon_mpc.nodes.mpc_process import MpcProcess, MpcProcessError
+from horizon_mpc.nodes.mpc_process import MpcProcess, MpcProcessError, private_domain_id
 
 
 def test_the_default_profile_is_the_documented_one():
@@ -174,10 +177,14 @@ def test_the_run_writes_summary_plots_and_gif(acceptance_run):
     for key in ("segments", "distance_travelled", "falls", "tick_time_ms", "deadline_misses",
                 "real_time_factor", "ticks_per_sim_second", "plan_age_ms", "bootstrap_ms"):
         assert key in data
-    # lockstep: one MPC tick per control period (20 ms), each on a state published by the sim
-    assert summary["ticks"] >= len(rec.t) - 2
-    assert summary["ticks_per_sim_second"] == pytest.approx(50, rel=0.02)
+    # lockstep: one MPC tick per control period (20 ms), each on a state published by the
+    # sim, the last recorded one included
+    assert summary["ticks"] == len(rec.t)
+    assert summary["ticks_per_sim_second"] == pytest.approx(50, rel=1e-9)
+    assert summary["periods_without_tick_percent"] == pytest.approx(0.0, abs=1e-9)
     assert summary["plan_age_ms"]["max"] == 0  # the sim waits for every plan
+    # isolated: a private domain, nobody else heard
+    assert data["domain_id"] == private_domain_id() and data["foreign_publishers"] == []
 
 
 @pytest.mark.slow
@@ -346,6 +353,29 @@ def test_the_summary_counts_ticks_per_sim_second_and_keeps_the_bootstrap_apart()
     assert s["plan_age_ms"]["median"] == pytest.approx(12.0)
 
 
+@pytest.mark.slow
+def test_a_lockstep_run_reports_another_node_publishing_on_its_domain():
+    """Two lockstep runs on one domain corrupted each other silently (a1 counted 96 ticks
+    per sim second): a foreign cmd_vel publisher on the run's domain is reported."""
+    domain = private_domain_id(os.getpid() + 1)
+    ctx = rclpy.Context()
+    rclpy.init(args=[], context=ctx, domain_id=domain)
+    try:
+        intruder = rclpy.create_node("intruder", context=ctx)
+        intruder.create_publisher(Twist, "cmd_vel", 10)
+        rec = run("go2", [Segment(2.5)], mode="lockstep", gif=False, domain_id=domain)
+        intruder.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+    assert rec.domain_id == domain
+    assert rec.foreign_publishers == ["cmd_vel: 2 publishers, 1 expected"]
+
+
+def test_the_cli_refuses_a_domain_id_ros_cannot_use(caplog):
+    assert main(["--domain-id", "233", "--no-gif"]) == 2
+    assert "--domain-id must be in 0..232" in caplog.text
+
+
 # ---------------------------------------------------------------------- real-time mode
 def _children(pid: int) -> list[int]:
     """Process ids whose parent is ``pid`` (from /proc)."""
@@ -395,6 +425,7 @@ def test_realtime_mode_runs_the_mpc_in_a_second_process(realtime_run):
     assert child["memory_mb"]["peak"] > 50  # it built a walking MPC of its own
     assert child["cpu_s"] > 0.1 * summary["sim_time"]
     assert "bootstrapped" in rec.mpc_log  # its output is kept
+    assert summary["domain_id"] == child["domain_id"] and summary["foreign_publishers"] == []
 
 
 @pytest.mark.slow
