@@ -1033,3 +1033,18 @@ def test_input_notes_of_different_kinds_are_throttled_apart():
     ignored = _note_kind("cmd_vel", "cmd_vel linear.z/angular.x/angular.y are ignored")
     assert clamp == clamp2 != ignored
     assert _note_kind("odom", "x") != _note_kind("cmd_vel", "x")
+
+
+def test_timing_settings_outside_where_the_robot_walked_are_warned_about():
+    from horizon_mpc.nodes.mpc_parameters import timing_warnings
+
+    assert timing_warnings(0.02, 24, 0.02, 6) == []  # the defaults
+    assert timing_warnings(0.02, 24, 0.1, 6) == []  # 10 Hz: walked
+    assert timing_warnings(0.01, 24, 0.01, 6) == []
+    five_hz = timing_warnings(0.02, 24, 0.2, 6)
+    assert any("ends before the next tick" in w and "publish_points >= 11" in w
+               for w in five_hz)
+    assert any("10 nodes a tick" in w for w in five_hz)
+    assert timing_warnings(0.02, 24, 0.2, 6, trigger="state") == []  # ticks on states
+    assert any("dt 0.04 s" in w for w in timing_warnings(0.04, 24, 0.04, 6))
+    assert any("n_nodes 12" in w for w in timing_warnings(0.02, 12, 0.02, 6))

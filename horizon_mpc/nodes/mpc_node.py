@@ -48,7 +48,7 @@ from horizon_mpc.nodes.mpc_outputs import (
     fill_trajectory,
     period_ns,
 )
-from horizon_mpc.nodes.mpc_parameters import LIVE_LIMITS, MpcParameters
+from horizon_mpc.nodes.mpc_parameters import LIVE_LIMITS, MpcParameters, timing_warnings
 from horizon_mpc.nodes.robot_description import check_urdf_text
 from horizon_mpc.nodes.spin import spin_until_signal
 
@@ -98,6 +98,11 @@ class MpcNode(MpcParameters, Node):
         settings.max_extrapolation = float(self._p("max_extrapolation"))
         settings.weights = self._weights_from_parameters(settings.weights)
 
+        for note in timing_warnings(settings.dt, settings.n_nodes,
+                                    1.0 / self._p("control_rate"),
+                                    min(self._p("publish_points"), settings.n_nodes),
+                                    self._p("trigger")):
+            self.get_logger().warning(note)
         t = time.perf_counter()
         if mpc is None:
             model = robot_model(cfg, str(self._p("urdf_path")),

@@ -9,6 +9,7 @@ attribute, the :class:`~horizon_mpc.mpc.controller.WalkingMpc`, once built).
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 from rcl_interfaces.msg import (
@@ -24,7 +25,7 @@ from horizon_mpc.locomotion.settings import Weights
 from horizon_mpc.nodes.declare import declare, float_range, int_range
 
 __all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MODEL_PARAMETERS", "WEIGHT_FIELDS",
-           "MpcParameters", "parameter_names"]
+           "MpcParameters", "parameter_names", "timing_warnings"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
@@ -34,6 +35,37 @@ MODEL_PARAMETERS = ("robot", "config", "urdf_path", "robot_description")
 # Hz of the node clock: a status every fifth 50 Hz tick (diagnostic tools poll at ~1 Hz);
 # its values summarise the ticks in between (solve_time_max_ms, ticks, deadline_misses)
 DIAGNOSTICS_RATE = 10.0
+
+
+# where the walking MPC was seen to walk and to fall (go2, lockstep, forward 0.3 m/s and a
+# turn; doc/mpc_node.md): the accepted ranges are wider, the node warns outside these
+WALKED_DT = (0.01, 0.035)  # s; 0.04 fell
+WALKED_MIN_NODES = 16  # 16, 20, 24 walked; 12 fell
+WALKED_MAX_NODES_PER_TICK = 5  # 10 Hz at dt 0.02 walked; 5 Hz (10 nodes a tick) fell
+
+
+def timing_warnings(dt: float, n_nodes: int, period: float, publish_points: int,
+                    trigger: str = "timer") -> list[str]:
+    """What in these timing settings is outside where the walking MPC was seen to walk, or
+    cannot work: a trajectory shorter than a control period (the robot has no plan until
+    the next tick). ``period``: the control period (s); empty when all is well."""
+    out = []
+    if trigger == "timer" and publish_points * dt < period - 1e-9:
+        need = math.ceil(period / dt - 1e-9) + 1
+        out.append(f"the published trajectory ({publish_points} points x dt {dt:g} s) ends "
+                   f"before the next tick ({period:g} s later): the robot has no plan in "
+                   f"between; set publish_points >= {need}")
+    if trigger == "timer" and period > WALKED_MAX_NODES_PER_TICK * dt + 1e-9:
+        out.append(f"control_rate {1 / period:g} Hz moves the horizon {period / dt:.3g} nodes a "
+                   f"tick: go2 walked with up to {WALKED_MAX_NODES_PER_TICK} (10 Hz at dt "
+                   "0.02 s) and flipped over with 10 (5 Hz)")
+    if not WALKED_DT[0] - 1e-12 <= dt <= WALKED_DT[1] + 1e-12:
+        out.append(f"dt {dt:g} s: go2 walked with {WALKED_DT[0]:g}-{WALKED_DT[1]:g} s and fell "
+                   "with 0.04 s")
+    if n_nodes < WALKED_MIN_NODES:
+        out.append(f"n_nodes {n_nodes}: go2 walked with {WALKED_MIN_NODES}-24 nodes (dt "
+                   "0.02 s) and fell with 12")
+    return out
 
 
 class MpcParameters:
