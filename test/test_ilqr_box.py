@@ -209,3 +209,29 @@ def test_converged_means_complementary_multipliers_too():
     assert abs(ilqr.stats.cost - ipopt.stats.cost) <= 1e-7 * ipopt.stats.cost
     for name in ("a", "b"):
         np.testing.assert_allclose(ilqr.solution[name], ipopt.solution[name], atol=1e-5)
+
+
+@pytest.mark.slow
+def test_a_one_sided_bound_active_over_an_unstable_stretch_converges():
+    """Pendulum driven upright with only u >= -3: the box iterates kept the bound active
+    over most of the horizon, the clamped policy's costates reached ~1e5 and a merit weight
+    that only grew within the call rejected every later step (max_iter at cost 550)."""
+    def build():
+        prb = Problem(60)
+        x = prb.create_state_variable("x", 2)
+        u = prb.create_input_variable("u", 1)
+        prb.set_dynamics(cs.vertcat(x[1], pendulum_dynamics(x[0], x[1], u)))
+        prb.set_dt(0.05)
+        x.set_bounds([0, 0], [0, 0], nodes=0)
+        u.set_bounds(-3.0, np.inf)
+        prb.create_cost("track", x[0] - np.pi, weight=5.0)
+        prb.create_cost("velocity", x[1], weight=0.1)
+        prb.create_cost("effort", u, weight=0.01)
+        return prb
+
+    ipopt = make_solver("ipopt", build())
+    assert ipopt.solve()
+    ilqr = make_solver("ilqr", build(), {"input_bounds": "box", "max_iter": 400})
+    assert ilqr.solve(), ilqr.stats.status
+    assert abs(ilqr.stats.cost - ipopt.stats.cost) <= 1e-6 * ipopt.stats.cost
+    assert ilqr.solution["u"].min() >= -3.0

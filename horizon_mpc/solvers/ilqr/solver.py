@@ -546,7 +546,12 @@ class IlqrSolver(Solver):
                 q["lx"], q["lu"], q["lxN"], bw.s, bw.S, bw.Qu, bw.Quu, bw.Qux, dX, dU,
                 None if proj is None else proj.pinv)
         self._gains = bw.K
-        self._nu = max(self._nu, 1.5 * lam_max, 1.0)
+        # the merit weight only grows within a call, except with the box: its clamped
+        # policy's costates swing with the active set (a pendulum with u >= -3 over an
+        # unstable stretch: |S| ~ 5e7 at one iteration, a weight of 1e6 kept after it and
+        # every later step rejected; following the estimate it converges, 217 iterations)
+        self._nu = max(1.5 * lam_max, 1.0) if self._box is not None else max(
+            self._nu, 1.5 * lam_max, 1.0)
         nu = self._nu
         merit0 = self._merit(ev, nu)
         deriv = slope - nu * (ev["gap_l1"] + ev["eq_l1"])
