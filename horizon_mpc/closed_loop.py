@@ -435,9 +435,9 @@ def _twist(cmd: np.ndarray) -> Twist:
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI: run the closed loop and write summary.json, plots and a GIF into ``--out``.
 
-    Exit code 0; 1 when the robot fell or the MPC process (real-time mode) failed (the log
-    says which); 2 for arguments it cannot run with (profile, robot, ``-p``, durations),
-    in one error line before anything starts.
+    Exit code 0; 1 when the robot fell, the MPC process (real-time mode) failed or another
+    node published on the run's topics (the log says which); 2 for arguments it cannot run
+    with (profile, robot, ``-p``, durations), in one error line before anything starts.
     """
     from horizon_mpc.closed_loop_report import summarise, write_report
 
@@ -500,6 +500,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         log.info("wrote %s", path)
     if summary["falls"]["count"]:
         log.error("the robot fell (first at t = %.2f s)", summary["falls"]["times"][0])
+        return 1
+    if summary["foreign_publishers"]:
+        log.error("the run was not isolated (%s): its figures may mix in another node's "
+                  "messages", "; ".join(summary["foreign_publishers"]))
         return 1
     return 0
 

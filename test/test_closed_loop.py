@@ -354,7 +354,7 @@ def test_the_summary_counts_ticks_per_sim_second_and_keeps_the_bootstrap_apart()
 
 
 @pytest.mark.slow
-def test_a_lockstep_run_reports_another_node_publishing_on_its_domain():
+def test_a_lockstep_run_reports_another_node_publishing_on_its_domain(tmp_path, caplog):
     """Two lockstep runs on one domain corrupted each other silently (a1 counted 96 ticks
     per sim second): a foreign cmd_vel publisher on the run's domain is reported."""
     domain = private_domain_id(os.getpid() + 1)
@@ -364,11 +364,16 @@ def test_a_lockstep_run_reports_another_node_publishing_on_its_domain():
         intruder = rclpy.create_node("intruder", context=ctx)
         intruder.create_publisher(Twist, "cmd_vel", 10)
         rec = run("go2", [Segment(2.5)], mode="lockstep", gif=False, domain_id=domain)
+        profile = tmp_path / "stand.yaml"
+        profile.write_text("segments:\n  - {duration: 1.5}\n")
+        code = main(["--profile", str(profile), "--domain-id", str(domain), "--no-gif",
+                     "--out", str(tmp_path / "out")])
         intruder.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
     assert rec.domain_id == domain
     assert rec.foreign_publishers == ["cmd_vel: 2 publishers, 1 expected"]
+    assert code == 1 and "the run was not isolated" in caplog.text  # the CLI fails the run
 
 
 def test_the_cli_refuses_a_domain_id_ros_cannot_use(caplog):
