@@ -7,6 +7,7 @@ Only numeric Pinocchio is used here (no CasADi), so the simulator can use it too
 
 from __future__ import annotations
 
+import logging
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -14,9 +15,11 @@ import numpy as np
 import pinocchio as pin
 
 from horizon_mpc.config import RobotConfig
-from horizon_mpc.robots import example_robot_files
+from horizon_mpc.robots import example_robot_files, known_robots
 
 __all__ = ["load_pin_model", "srdf_joint_values", "standing_configuration"]
+
+log = logging.getLogger(__name__)
 
 
 def _urdf_path(cfg: RobotConfig) -> Path:
@@ -66,8 +69,10 @@ def standing_configuration(
 ) -> tuple[pin.Model, np.ndarray]:
     """The robot standing on flat ground (z = 0) at its nominal posture.
 
-    Joints come from the SRDF group state ``cfg.nominal_posture`` (if the robot ships an
-    SRDF), then ``cfg.nominal_joints`` overrides. The base sits at x = y = 0 with identity
+    Joints come from the SRDF group state ``cfg.nominal_posture`` (if ``cfg.robot`` is an
+    example robot that ships an SRDF: also for a URDF given in its place, by joint name),
+    then ``cfg.nominal_joints`` overrides; a joint of the model they leave out stays at 0,
+    with a warning. The base sits at x = y = 0 with identity
     orientation, at the height that puts the lowest contact frame of ``cfg.feet`` at
     ``clearance`` above the ground.
 
@@ -77,12 +82,20 @@ def standing_configuration(
     model = model if model is not None else load_pin_model(cfg)
     q = pin.neutral(model)
     values: dict[str, float] = {}
-    srdf = None if cfg.urdf_path else example_robot_files(cfg.robot).srdf
+    # a URDF given instead of the example robot's (sim_node's urdf_path, a config's) keeps
+    # its SRDF posture: the simulator started a go2 URDF with straight legs, which the MPC
+    # (planning with the SRDF posture) refused as 1.5 rad outside the joint limits
+    srdf = example_robot_files(cfg.robot).srdf if cfg.robot in known_robots() else None
     if srdf is not None and cfg.nominal_posture:
         values.update(srdf_joint_values(srdf, cfg.nominal_posture))
     values.update(cfg.nominal_joints)
     for name, value in values.items():
         _set_joint(model, q, name, value)
+    unset = [model.names[j] for j in range(2, model.njoints) if model.joints[j].nq
+             and model.names[j] not in values]
+    if values and unset:
+        log.warning("config %r: the nominal posture leaves joints %s of the model at 0 (is "
+                    "the URDF the config's robot?)", cfg.name, unset)
     data = model.createData()
     pin.framesForwardKinematics(model, data, q)
     missing = [f for f in cfg.feet if not model.existFrame(f)]

@@ -505,6 +505,10 @@ def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):
     assert st_.weights.posture == 2.0 and st_.max_velocity[0] == 0.4
     assert not h.node.set_parameters([Parameter("gait", value="moonwalk")])[0].successful
     assert not h.node.set_parameters([Parameter("robot", value="solo12")])[0].successful
+    # 1e30 made the cost 1e32 and go2 sink to the ground: implausible weights are refused
+    huge = h.node.set_parameters([Parameter("w_posture", value=1e30)])[0]
+    assert not huge.successful and "[0, 1e+09]" in huge.reason
+    assert h.node.mpc.settings.weights.posture == 2.0
     h.node.set_parameters([Parameter("gait", value="trot"), Parameter("w_posture", value=1.0),
                            Parameter("max_vx", value=max_vx)])
 

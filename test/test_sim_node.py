@@ -315,3 +315,58 @@ def test_a_path_given_as_robot_description_is_refused_pointing_to_urdf_path(cont
     with pytest.raises(ValueError, match="urdf_path"):
         SimNode(parameter_overrides=[Parameter("robot_description", value=path)],
                 context=context)
+
+
+def test_a_urdf_given_for_the_robot_starts_in_the_configs_posture(context):
+    """The example robot's own URDF given as urdf_path started with straight legs (the SRDF
+    posture was skipped), which the MPC refused as 1.5 rad outside the joint limits."""
+    from horizon_mpc.robots import example_robot_files
+
+    plain = SimNode(parameter_overrides=[Parameter("lockstep", value=True)], context=context)
+    given = SimNode(node_name="sim_given", context=context, parameter_overrides=[
+        Parameter("lockstep", value=True),
+        Parameter("urdf_path", value=str(example_robot_files("go2").urdf))])
+    try:
+        np.testing.assert_allclose(given.sim.q_start, plain.sim.q_start, atol=1e-12)
+        assert given.sim.q_start[8] > 0.5  # the thigh is bent, not at 0
+    finally:
+        plain.destroy_node()
+        given.destroy_node()
+
+
+def test_a_missing_collision_mesh_is_one_clear_error_and_a_missing_visual_is_left_out(
+        context, tmp_path):
+    from horizon_mpc.robots import example_robot_files
+
+    text = example_robot_files("go2").urdf.read_text()
+    visuals_gone = text.replace("visuals/", "nowhere/")
+    (tmp_path / "visuals_gone.urdf").write_text(visuals_gone)
+    node = SimNode(parameter_overrides=[Parameter("lockstep", value=True), Parameter(
+        "urdf_path", value=str(tmp_path / "visuals_gone.urdf"))], context=context)
+    try:
+        assert node.sim.n_joints == 12 and node.sim.state().q[2] > 0.3  # it loads, stands
+    finally:
+        node.destroy_node()
+    (tmp_path / "collisions_gone.urdf").write_text(text.replace("collisions/", "nowhere/"))
+    with pytest.raises(FileNotFoundError, match="cannot find the collision meshes of base"):
+        SimNode(parameter_overrides=[Parameter("urdf_path", value=str(
+            tmp_path / "collisions_gone.urdf"))], context=context)
+
+
+def test_use_sim_time_is_turned_off_at_start_and_refused_live(context):
+    """The sim publishes /clock: with use_sim_time its timers waited for it and it froze."""
+    node = SimNode(parameter_overrides=[Parameter("use_sim_time", value=True)],
+                   context=context)
+    try:
+        assert node.get_parameter("use_sim_time").value is False
+        result = node.set_parameters([Parameter("use_sim_time", value=True)])[0]
+        assert not result.successful and "/clock" in result.reason
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        end = time.monotonic() + 5.0
+        while node.now_ns < 50_000_000:  # free running: sim time advances
+            assert time.monotonic() < end, "the simulation did not advance"
+            executor.spin_once(timeout_sec=0.01)
+        executor.shutdown()
+    finally:
+        node.destroy_node()

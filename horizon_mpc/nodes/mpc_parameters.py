@@ -68,6 +68,21 @@ def timing_warnings(dt: float, n_nodes: int, period: float, publish_points: int,
     return out
 
 
+#: a cost weight above this is refused: w_posture 1e30 made the cost 1e32, the solver fail
+#: every tick and go2 sink to the ground (1e8 was harmless; the configs use up to ~1e4)
+MAX_WEIGHT = 1e9
+
+
+def weight_problem(name: str, values: np.ndarray, size: int) -> str | None:
+    """Why the weight parameter ``name`` cannot take ``values`` (size ``size`` needed:
+    finite, within [0, MAX_WEIGHT]), or None."""
+    if values.size != size or not np.all(np.isfinite(values)) or np.any(values < 0) \
+            or np.any(values > MAX_WEIGHT):
+        return (f"{name} needs {size} finite value(s) in [0, {MAX_WEIGHT:g}], got "
+                f"{values.tolist()}")
+    return None
+
+
 class MpcParameters:
     """Declaration and live update of the MPC node's parameters (mixin of ``MpcNode``)."""
 
@@ -140,9 +155,9 @@ class MpcParameters:
         for n, v in values.items():
             # rclpy hands array parameters over as array.array (a live set crashed on it)
             arr = np.atleast_1d(np.asarray(v, dtype=float))
-            size = np.size(getattr(base, n))
-            if arr.size != size:
-                raise ValueError(f"parameter w_{n}: {size} value(s) needed, got {arr.size}")
+            problem = weight_problem(f"w_{n}", arr, np.size(getattr(base, n)))
+            if problem:
+                raise ValueError(f"parameter {problem}")
             out[n] = arr.tolist() if np.ndim(v) else float(v)
         return dataclasses.replace(base, **out)
 
@@ -155,13 +170,10 @@ class MpcParameters:
                 return SetParametersResult(successful=False,
                                            reason=f"unknown gait {value!r}; gaits: {list(GAITS)}")
             if name.startswith("w_"):
-                old = self._p(name)
-                arr = np.atleast_1d(np.asarray(value, dtype=float))
-                if arr.size != np.atleast_1d(old).size or not np.all(np.isfinite(arr)) \
-                        or np.any(arr < 0):
-                    return SetParametersResult(
-                        successful=False, reason=f"{name} needs {np.atleast_1d(old).size} "
-                        f"finite non-negative value(s), got {value!r}")
+                problem = weight_problem(name, np.atleast_1d(np.asarray(value, dtype=float)),
+                                         np.atleast_1d(self._p(name)).size)
+                if problem:
+                    return SetParametersResult(successful=False, reason=problem)
         st = self.mpc.settings
         if any(n in new for n in LIVE_GAIT):
             g = {n: new.get(n, self._p(n)) for n in LIVE_GAIT}

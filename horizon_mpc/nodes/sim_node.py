@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -68,6 +69,7 @@ class SimNode(Node):
     ) -> None:
         super().__init__(node_name, parameter_overrides=list(parameter_overrides or []),
                          **kwargs)
+        self._keep_system_clock()
         self._declare_parameters()
         par = self._param
         robot = par("config") or par("robot")
@@ -140,6 +142,24 @@ class SimNode(Node):
         )
 
     # ------------------------------------------------------------------ parameters
+    def _keep_system_clock(self) -> None:
+        """This node publishes /clock: on ``use_sim_time`` (a shared params file's
+        ``/**: use_sim_time: true``) its timers waited for its own clock and it froze
+        without a word. Set at start-up it is turned off with a warning; set live, refused."""
+        if self.get_parameter("use_sim_time").value:
+            self.get_logger().warning("use_sim_time is true, but this node is the clock (it "
+                                      "publishes /clock): it runs on the system clock, "
+                                      "use_sim_time set to false")
+            self.set_parameters([Parameter("use_sim_time", value=False)])
+
+        def refuse(params: list[Parameter]) -> SetParametersResult:
+            if any(p.name == "use_sim_time" and p.value for p in params):
+                return SetParametersResult(successful=False, reason="sim_node publishes "
+                                           "/clock itself: it cannot run on /clock")
+            return SetParametersResult(successful=True)
+
+        self.add_on_set_parameters_callback(refuse)
+
     def _declare_parameters(self) -> None:
         # all read at start-up: read-only, so a live set is refused, not accepted and ignored
         declare = functools.partial(declare_parameter, self, read_only=True)

@@ -118,23 +118,56 @@ def _resolve(uri: str, urdf: Path, roots: list[Path]) -> str | None:
 def resolve_mesh_uris(urdf: Path, search_dirs: list[Path] | None = None) -> str:
     """The URDF text of ``urdf`` with every ``filename="..."`` made an absolute path.
 
-    Unresolvable URIs are left as they are (pybullet then skips that mesh) and logged.
+    A ``<visual>`` whose mesh cannot be found is left out, with a warning (pybullet refuses
+    the whole URDF for one missing mesh: "Cannot load URDF file").
+
+    Raises:
+        FileNotFoundError: a ``<collision>`` mesh cannot be found (without it a foot would
+            fall through the ground: go2's feet collide through meshes).
     """
     text = urdf.read_text(encoding="utf-8")
     roots = _package_roots(urdf, [Path(d) for d in (search_dirs or [])])
-    cache: dict[str, str] = {}
+    cache: dict[str, str | None] = {}
 
     def substitute(match: re.Match[str]) -> str:
         uri = match.group(1)
         if uri not in cache:
-            resolved = _resolve(uri, urdf, roots)
-            if resolved is None:
-                _LOG.warning("%s: cannot resolve mesh %r; the mesh is skipped", urdf, uri)
-                resolved = uri
-            cache[uri] = resolved
-        return f'filename="{cache[uri]}"'
+            cache[uri] = _resolve(uri, urdf, roots)
+            if cache[uri] is not None and not Path(cache[uri]).is_file():
+                cache[uri] = None
+        return f'filename="{cache[uri] or uri}"'
 
-    return _FILENAME.sub(substitute, text)
+    text = _FILENAME.sub(substitute, text)
+    missing = {uri for uri, path in cache.items() if path is None}
+    return _without_meshes(text, missing, urdf) if missing else text
+
+
+def _without_meshes(text: str, uris: set[str], urdf: Path) -> str:
+    """``text`` without the ``<visual>`` elements whose mesh is one of ``uris`` (logged);
+    FileNotFoundError when a ``<collision>`` uses one."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return text  # not XML: pybullet's own error names it
+    missing_collisions, missing_visuals = [], []
+    for link in root.iter("link"):
+        for kind in ("visual", "collision"):
+            for element in link.findall(kind):
+                mesh = element.find("geometry/mesh")
+                uri = mesh.get("filename") if mesh is not None else None
+                if uri in uris:
+                    (missing_collisions if kind == "collision" else missing_visuals).append(
+                        (link, element, uri))
+    if missing_collisions:
+        where = "; ".join(f"{link.get('name')}: {uri}" for link, _, uri in missing_collisions)
+        raise FileNotFoundError(f"{urdf}: cannot find the collision meshes of {where} "
+                                "(package:// URIs are looked up in the ament prefixes, "
+                                "example-robot-data and the URDF's folders)")
+    for link, element, uri in missing_visuals:
+        link.remove(element)
+        _LOG.warning("%s: cannot find mesh %r; the <visual> of link %r is left out", urdf,
+                     uri, link.get("name"))
+    return ET.tostring(root, encoding="unicode")
 
 
 def _links_without_inertial(urdf_text: str) -> set[str]:
@@ -161,12 +194,16 @@ def load_robot(
     with tempfile.TemporaryDirectory(prefix="horizon_mpc_urdf_") as tmp:
         path = Path(tmp) / urdf.name
         path.write_text(text, encoding="utf-8")
-        body = p.loadURDF(
-            str(path),
-            flags=p.URDF_USE_INERTIA_FROM_FILE,
-            useFixedBase=False,
-            physicsClientId=client,
-        )
+        try:
+            body = p.loadURDF(
+                str(path),
+                flags=p.URDF_USE_INERTIA_FROM_FILE,
+                useFixedBase=False,
+                physicsClientId=client,
+            )
+        except p.error as exc:  # pybullet says only "Cannot load URDF file."
+            raise ValueError(f"pybullet could not load the URDF {urdf} ({exc}; its own "
+                             "parser's messages, if any, are above)") from None
     if body < 0:
         raise RuntimeError(f"pybullet could not load the URDF {urdf}")
     root_link = p.getBodyInfo(body, physicsClientId=client)[0].decode()
