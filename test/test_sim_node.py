@@ -370,3 +370,10 @@ def test_use_sim_time_is_turned_off_at_start_and_refused_live(context):
         executor.shutdown()
     finally:
         node.destroy_node()
+
+
+def test_an_invalid_robot_description_is_reported_as_that_parameter(context):
+    with pytest.raises(ValueError, match="^robot_description: "):
+        SimNode(parameter_overrides=[Parameter(
+            "robot_description", value='<robot name="x"><link name="a"></robot>')],
+            context=context)

@@ -116,7 +116,7 @@ class MpcNode(MpcParameters, Node):
             mpc.set_stand_when_idle(settings.stand_when_idle)
             mpc.wp.set_weights(settings.weights)
         self.mpc = mpc
-        source = ("robot_description" if self._p("robot_description") else
+        source = ("robot_description" if str(self._p("robot_description")).strip() else
                   str(self._p("urdf_path")) or "example-robot-data")
         self.get_logger().info(
             f"built the {cfg.name} walking MPC (model from {source}) in "

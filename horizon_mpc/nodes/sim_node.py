@@ -90,6 +90,13 @@ class SimNode(Node):
                 trajectory_timeout=par("trajectory_timeout"),
                 max_stamp_offset=par("max_stamp_offset"),
             )
+        except (ValueError, RuntimeError, OSError) as exc:
+            given = self._description_file is not None
+            self._remove_description_file()
+            if not given:
+                raise
+            # name the parameter, not the temporary file the text was written to
+            raise ValueError(f"robot_description: {exc}") from None
         except BaseException:
             self._remove_description_file()
             raise
