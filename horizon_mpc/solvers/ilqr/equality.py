@@ -33,8 +33,8 @@ if TYPE_CHECKING:  # riccati_c imports this module
 
 __all__ = ["INPUT_ATOL", "EqualityLayout", "Projection", "fill_by_svd", "project"]
 
-#: A row whose input Jacobian D is within this of zero, relative to max(1, |C|) (its state
-#: Jacobian), is round-off, not a row the input moves: e.g. a unit-quaternion row under a
+#: A row whose input Jacobian D is within this of zero (2-norm), relative to max(1, |C|)
+#: (its state Jacobian), is round-off, not a row the input moves: e.g. a unit-quaternion row under a
 #: norm-preserving integrator (D ~ 1e-20, C ~ 1e-16), whose projection would be
 #: P_x = C / D ~ 1e3. Such directions are dropped, as dependent ones are (the row is then met
 #: only if it already is; ``Projection.rank_deficient`` counts the nodes where it is not).
@@ -277,7 +277,8 @@ def _svd_solve(W: np.ndarray, nu: int, rtol: float) -> _Solution:
     V = np.swapaxes(Vt, 1, 2)
     smax = s[:, :1] if s.shape[1] else np.zeros((b, 1))
     # round-off input Jacobians too (INPUT_ATOL against the node's largest state Jacobian)
-    floor = INPUT_ATOL * np.maximum(1.0, np.abs(W[..., nu:-1]).max(axis=(1, 2), initial=0.0))
+    floor = INPUT_ATOL * np.maximum(1.0, np.linalg.norm(W[..., nu:-1], axis=2).max(
+        axis=1, initial=0.0))
     keep = (s > rtol * np.maximum(smax, 1e-300)) & (s > floor[:, None])  # (b, min(m, nu))
     inv_s = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
     r = keep.shape[1]
@@ -393,9 +394,9 @@ def _qr_nodes(W_flat: np.ndarray, rows: np.ndarray, count: np.ndarray, sel: np.n
     ok &= cond2 < rtol ** -2  # NaN: not ok
     # a row whose input Jacobian is round-off (INPUT_ATOL): to the SVD, which drops it
     slot_rows = np.arange(w) < cnt[:, None]
-    dmax = np.abs(Wc[..., :nu]).max(axis=2)
-    cmax = np.maximum(1.0, np.abs(Wc[..., nu:-1]).max(axis=2))
-    ok &= np.all((dmax > INPUT_ATOL * cmax) | ~slot_rows, axis=1)
+    dnorm = np.linalg.norm(Wc[..., :nu], axis=2)
+    cnorm = np.maximum(1.0, np.linalg.norm(Wc[..., nu:-1], axis=2))
+    ok &= np.all((dnorm > INPUT_ATOL * cnorm) | ~slot_rows, axis=1)
     # D^+ (b, nu, w), zero on unused slots (Q_1 copied: a strided operand is slower)
     pinv = np.ascontiguousarray(Q[:, :, :w]) @ np.swapaxes(Rinv, 1, 2)
     P_x = pinv @ Wc[..., nu:-1]

@@ -1120,12 +1120,12 @@ static int project(int N, int m, int nu, int ndx, const double *W, const uint8_t
 #define WROW(j) (W + ((size_t)i * m + slot[j]) * ld)
         /* a row whose input Jacobian is round-off next to its state Jacobian (equality.py's
          * INPUT_ATOL) leaves the node to the SVD, which drops it */
-        for (int j = 0; j < c && ok[i]; j++) {
+        for (int j = 0; j < c && ok[i]; j++) {  /* 2-norms: sums the compiler vectorises */
             const double *wj = WROW(j);
-            double dmax = 0.0, cmax = 1.0;
-            for (int p = 0; p < nu; p++) dmax = fmax(dmax, fabs(wj[p]));
-            for (int r = 0; r < ndx; r++) cmax = fmax(cmax, fabs(wj[nu + r]));
-            if (!(dmax > INPUT_ATOL * cmax)) ok[i] = 0;  /* NaN: not ok */
+            double dd = 0.0, cc = 0.0;
+            for (int p = 0; p < nu; p++) dd += wj[p] * wj[p];
+            for (int r = 0; r < ndx; r++) cc += wj[nu + r] * wj[nu + r];
+            if (!(dd > INPUT_ATOL * INPUT_ATOL * fmax(1.0, cc))) ok[i] = 0;  /* NaN: not ok */
         }
         if (!ok[i]) continue;
         /* pinned rows: one nonzero in D, in a column no earlier pinned row has (a zero
