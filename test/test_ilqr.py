@@ -521,3 +521,32 @@ def test_unit_quaternion_rows_under_a_norm_preserving_integrator_converge(codege
     ok_l, ilqr = _solve(build(), "ilqr", {**OPTS, "codegen": codegen, "max_iter": 100})
     assert ok_i and ok_l, ilqr.stats.status
     assert abs(ilqr.stats.cost - ipopt.stats.cost) <= 1e-6 * ipopt.stats.cost
+
+
+@pytest.mark.parametrize("input_bounds", ["lagrangian", "box"])
+def test_an_active_input_bound_is_never_called_converged_short_of_it(input_bounds):
+    """x' = u, |u| <= 0.5 active on 19 of 20 nodes (a convex problem): the augmented
+    Lagrangian stopped 'converged' 7.7e-5 above IPOPT's optimum with u 1.3e-4 inside the
+    bound its multiplier (1.9) pressed it onto: complementarity was measured against
+    lambda / rho, and rho had reached 1e9."""
+    def build():
+        prb = Problem(20)
+        x = prb.create_state_variable("x", 1)
+        u = prb.create_input_variable("u", 1)
+        prb.set_dynamics(u)
+        prb.set_dt(0.1)
+        x.set_bounds(0, 0, nodes=0)
+        prb.create_cost("track", x - 1, weight=1.0)
+        prb.create_cost("effort", u, weight=0.01)
+        u.set_bounds(-0.5, 0.5)
+        return prb
+
+    ok_i, ipopt = _solve(build(), "ipopt")
+    ok_l, ilqr = _solve(build(), "ilqr", {"input_bounds": input_bounds})
+    assert ok_i
+    if input_bounds == "box":  # the box keeps the bound exactly: the optimum
+        assert ok_l, ilqr.stats.status
+    if ok_l:
+        assert ilqr.stats.cost == pytest.approx(ipopt.stats.cost, rel=1e-7)
+    else:
+        assert ilqr.stats.status == "max_iter"

@@ -351,3 +351,20 @@ def test_ilqr_feedback_of_the_wrong_size_keeps_the_preparation(prb):
         solver.feedback(np.zeros(3))
     assert solver.prepared
     assert solver.feedback(np.zeros(2))
+
+
+def test_a_variable_named_x_beside_other_states_is_warned_about_and_stacked_stays_reachable(
+        caplog):
+    import logging
+
+    from horizon_mpc.examples import build_double_integrator
+
+    prb, _ = build_double_integrator(5)  # states 'x' (position) and 'v'
+    with caplog.at_level(logging.WARNING):
+        solver = make_solver("ipopt", prb)
+    assert "solution['x'] will be the variable 'x', not the stacked states" in caplog.text
+    assert solver.stacked_solution is None
+    assert solver.solve()
+    X, U, _ = solver.stacked_solution
+    assert solver.solution["x"].shape == (1, 6) and X.shape == (2, 6) and U.shape == (1, 5)
+    np.testing.assert_array_equal(X[:1], solver.solution["x"])

@@ -15,6 +15,7 @@ After every solve the solution is written back into the variables' initial guess
 
 from __future__ import annotations
 
+import logging
 import math
 import numbers
 from dataclasses import asdict, dataclass, field
@@ -23,6 +24,8 @@ from typing import Any
 import numpy as np
 
 from horizon_mpc.problem import Problem
+
+log = logging.getLogger(__name__)
 
 __all__ = ["Solver", "SolverStats"]
 
@@ -69,6 +72,19 @@ class Solver:
         self._structure_revision = prb.structure_revision
         self.solution: dict[str, np.ndarray] = {}
         self.stats = SolverStats()
+        for key, kind, group in (("x", "states", prb.states), ("u", "inputs", prb.inputs)):
+            named = [v for v in (*prb.states, *prb.inputs, *prb.singles) if v.name == key]
+            if named and not (len(group) == 1 and group[0] is named[0]):
+                # a state 'x' beside other states (the bundled double integrator's position)
+                log.warning("solution[%r] will be the variable %r, not the stacked %s: "
+                            "those are in solver.stacked_solution", key, key, kind)
+
+    @property
+    def stacked_solution(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The last solution stacked: states (nx, N+1), inputs (nu, N), singles (ns, 1)
+        (``solution['x']`` and ``solution['u']`` too, unless a variable has that name), or
+        None before a solve."""
+        return getattr(self, "_stacked_solution", None)
 
     def check_problem_unchanged(self) -> None:
         """Raise RuntimeError when the problem's structure (dynamics, dt, transcription, a

@@ -146,19 +146,20 @@ class AugmentedLagrangian:
         return v
 
     def complementarity(self, c: np.ndarray) -> float:
-        """The largest ``|max(c - ub, -lam_up / rho)|`` (and its lower-side mirror) over the
+        """The largest ``|min(lam_up, ub - c)|`` (and its lower-side mirror) over the
         inequality rows: zero at a KKT point of the rows, where a row pressed by its
         multiplier sits on its bound; the primal violation where a row is past it (0 for
         barrier rows: they carry no multiplier). The augmented Lagrangian's stationary
-        points with multipliers that press rows away from their bounds fail it."""
+        points with multipliers that press rows away from their bounds fail it (measured
+        against ``lam / rho`` instead, a penalty at ``rho_max`` hid a multiplier of 1.9
+        pressing a bound 1.3e-4 away)."""
         if self.barrier:
             return 0.0
         worst = 0.0
-        for mask, lam, gap in ((self.has_up, self.lam_up, c - self.ub),
-                               (self.has_lo, self.lam_lo, self.lb - c)):
+        for mask, lam, slack in ((self.has_up, self.lam_up, self.ub - c),
+                                 (self.has_lo, self.lam_lo, c - self.lb)):
             if mask.any():
-                v = np.maximum(gap[mask], -lam[mask] / self.rho[mask])
-                worst = max(worst, float(np.max(np.abs(v))))
+                worst = max(worst, float(np.max(np.abs(np.minimum(lam[mask], slack[mask])))))
         return worst
 
     def _barrier_terms(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

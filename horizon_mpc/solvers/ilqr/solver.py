@@ -65,7 +65,9 @@ class IlqrSolver(Solver):
     Options (defaults in ``DEFAULTS``): ``max_iter``; ``rti`` (True: exactly
     ``iterations_per_call`` iterations per ``solve()``, no convergence loop);
     ``iterations_per_call``; ``tol`` (stationarity: expected decrease relative to the cost);
-    ``tol_constraint`` (defects, constraints, bounds; inf-norm); ``mu_init``/``mu_min``/
+    ``tol_constraint`` (defects, constraints, bounds; inf-norm); ``tol_complementarity``
+    (inequality rows: the largest ``|min(multiplier, slack)|``, as IPOPT's
+    ``compl_inf_tol``, whose default it takes); ``mu_init``/``mu_min``/
     ``mu_max`` (regularisation); ``rho_init``/``rho_factor``/``rho_max`` (AL penalty; fixed
     at its current value in ``rti`` mode);
     ``line_search_steps`` (number of halvings); ``time_budget`` (s per call, None: none; an
@@ -101,6 +103,7 @@ class IlqrSolver(Solver):
         "iterations_per_call": 1,
         "tol": 1e-8,
         "tol_constraint": 1e-6,
+        "tol_complementarity": 1e-4,
         "mu_init": 1e-8,
         "mu_min": 1e-10,
         "mu_max": 1e10,
@@ -679,7 +682,7 @@ class IlqrSolver(Solver):
                 log.info("ilqr %3d cost %.6e viol %.2e alpha %.3f mu %.1e", it, ev["cost"],
                          ev["viol"], info["alpha"], self.mu)
             if not rti and stationary and ev["viol"] <= o["tol_constraint"] and (
-                    self._complementarity(ev) <= o["tol_constraint"]):
+                    self._complementarity(ev) <= o["tol_complementarity"]):
                 status, converged = "converged", True
                 break
             if not rti and stationary and self._al.barrier and (
