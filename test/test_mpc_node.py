@@ -219,9 +219,11 @@ class Harness:
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.01)
 
-    def publish_state(self, age: float = 0.0) -> int:
-        """The standing state, stamped ``age`` s before now; returns the stamp (ns)."""
-        stamp_ns = self.probe.get_clock().now().nanoseconds - round(age * 1e9)
+    def publish_state(self, age: float = 0.0, stamp_ns: int | None = None) -> int:
+        """The standing state, stamped ``age`` s before now (or at ``stamp_ns``); returns the
+        stamp (ns)."""
+        if stamp_ns is None:
+            stamp_ns = self.probe.get_clock().now().nanoseconds - round(age * 1e9)
         stamp = time_from_ns(stamp_ns)
         q = self.q
         self.pub_js.publish(joint_state_to_msg(stamp, self.node.joint_names, q[7:],
@@ -515,10 +517,12 @@ def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):
 
 def test_a_state_older_than_the_last_one_planned_from_is_refused(harness):
     h = harness()
-    h.publish_state()
+    used = h.publish_state()
     h.spin_until(lambda: h.trajectories)
     n, skips = len(h.trajectories), h.node.stale_skips
-    h.publish_state(age=0.06)  # 60 ms before the one just used (clock not gone back)
+    # 60 ms before the one just used (clock not gone back; stamped from that one, not from
+    # now: the bootstrap tick alone can take longer than 60 ms on a loaded machine)
+    h.publish_state(stamp_ns=used - 60_000_000)
     h.spin_for(0.3)
     assert len(h.trajectories) == n and h.node.stale_skips == skips + 1
     h.publish_state()
