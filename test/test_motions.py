@@ -161,6 +161,7 @@ def test_cli_rejects_bad_settings_before_solving_in_one_line(capsys):
     ("walk", "average_cycles=0", "'average_cycles' must be > 0"),   # NaN velocities
     ("walk", "w_touchdown=-1", "'w_touchdown' must be >= 0"),
     ("walk", "foo", "--set expects KEY=VALUE"),                     # exit code 1 before
+    ("turn", "locked_joints=[foo]", "foo"),                         # a traceback before
 ], ids=lambda x: x if isinstance(x, str) and "=" in x else None)
 def test_cli_rejects_settings_it_cannot_run_before_building(capsys, motion, setting, text):
     from horizon_mpc.motions.cli import main
@@ -168,6 +169,23 @@ def test_cli_rejects_settings_it_cannot_run_before_building(capsys, motion, sett
     assert main([motion, "--set", setting, "--no-animation"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("motion: error:") and text in err and "Traceback" not in err
+
+
+def test_cli_refuses_an_out_path_that_is_a_file_before_solving(tmp_path, capsys):
+    from horizon_mpc.motions.cli import main
+
+    (tmp_path / "taken").write_text("")
+    assert main(["leap", "--out", str(tmp_path / "taken"), "--no-animation"]) == 2
+    assert "exists and is not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_cli_a_walk_shorter_than_two_ticks_is_an_error(capsys):
+    from horizon_mpc.motions.cli import main
+
+    assert main(["walk", "--set", "duration=0.001", "--no-animation"]) == 2
+    err = capsys.readouterr().err
+    assert "shorter than two MPC ticks" in err and "Traceback" not in err
 
 
 @pytest.mark.parametrize("body, text", [
@@ -269,6 +287,39 @@ def test_dynamics_check_sees_a_state_off_the_dynamics_and_an_unbalanced_base(lea
         res.q, res.v, res.a = q, v, a
     assert check["defect"][30] >= 0.9e-4
     assert np.abs(check["base_wrench"][:, 20]).max() >= 0.5e-3 * model.mass
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("motion", ["leap", "turn"])
+def test_loaded_feet_stay_on_the_ground_between_the_nodes(motion, request):
+    res, *_ = request.getfixturevalue(motion)
+    s = res.summary
+    assert s["max_loaded_foot_height"] <= 0.005 and s["max_loaded_foot_slip"] <= 0.005
+    assert s["loaded_off_ground_intervals"] == 0 and res.stats["success"]
+
+
+def test_contact_check_sees_a_loaded_foot_lifted_within_an_interval(leap):
+    """A turn with 1 m steps pushed 227 N through stance feet up to 33 cm above the ground
+    between the nodes and was reported solved: the check samples inside the intervals."""
+    from horizon_mpc.motions.analysis import (
+        CONTACT_TOLERANCE,
+        check_contacts,
+        contact_check,
+        loaded,
+    )
+
+    res, _, model, _ = leap
+    k = int(np.flatnonzero(loaded(res).all(axis=0))[0])  # every foot pushes
+    v, summary, stats = res.v.copy(), dict(res.summary), dict(res.stats)
+    try:
+        res.v[2, k] += 1.0  # the base (and the feet with it) rises 0.1 m/s x dt within k
+        check = contact_check(res, model.pin_model)
+        res.summary.update(check)
+        check_contacts(res)
+        assert check["max_loaded_foot_height"] >= 0.9 * res.dt > CONTACT_TOLERANCE
+        assert not res.stats["success"] and "inconsistent contacts" in res.stats["status"]
+    finally:
+        res.v, res.summary, res.stats = v, summary, stats
 
 
 # ---- leap

@@ -16,6 +16,7 @@ import logging
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import yaml
@@ -82,13 +83,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         solver = args.solver or mc.solver
         cfg = load_robot_config(robot)
         settings = mc.settings_for(cls, cfg.name, _overrides(args.set))
-    except (ValueError, FileNotFoundError, yaml.YAMLError) as exc:
+        model = robot_model(cfg, getattr(settings, "locked_joints", ()))
+        out = Path(args.out or f"out/motions/{args.motion}")
+        if out.exists() and not out.is_dir():  # found before the solve, not after it
+            raise ValueError(f"--out {out} exists and is not a folder")
+    except (ValueError, KeyError, FileNotFoundError, yaml.YAMLError) as exc:
         print(f"motion: error: {exc}", file=sys.stderr)
         return 2
-    model = robot_model(cfg, getattr(settings, "locked_joints", ()))
     print(f"{args.motion}: {cfg.name} ({model.nv} dof), solver {solver}")
     t0 = time.perf_counter()
-    res = run(cfg, solver, settings, model=model)
+    try:
+        res = run(cfg, solver, settings, model=model)
+    except ValueError as exc:  # settings the problem cannot be built with (n_nodes 0, ...)
+        print(f"motion: error: cannot build the {args.motion}: {exc}", file=sys.stderr)
+        return 2
     wall = time.perf_counter() - t0
     extra = {"settings": dataclasses.asdict(settings), "wall_time": wall}
     if args.motion == "leap" and not args.no_replay:
@@ -103,7 +111,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             "final_roll_pitch_yaw": rep.final_rpy.tolist(), "max_tilt": rep.max_tilt}
         extra["pybullet_replay"]["within_tolerance"] = bool(
             extra["pybullet_replay"]["landing_error"] <= REPLAY_TOLERANCE)
-    out = args.out or f"out/motions/{args.motion}"
     render = {"yaw": 90.0} if args.motion == "leap" else {}
     files = write_outputs(res, cfg, out, effort_limit=model.joint_effort_limit,
                           animation=not args.no_animation, extra=extra, **render)

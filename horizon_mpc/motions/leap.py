@@ -16,7 +16,14 @@ import numpy as np
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import ContactSchedule
 from horizon_mpc.model import RobotModel
-from horizon_mpc.motions.analysis import best_overlap, dynamics_check, flight_phases, loaded
+from horizon_mpc.motions.analysis import (
+    best_overlap,
+    check_contacts,
+    contact_check,
+    dynamics_check,
+    flight_phases,
+    loaded,
+)
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import timeline_schedule
 from horizon_mpc.motions.settings import check_settings
@@ -200,6 +207,7 @@ def leap_summary(res: MotionResult, lp: LeapProblem, model: RobotModel) -> dict:
     dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
     out["max_dynamics_defect"] = dyn["max_defect"]
     out["max_base_wrench"] = dyn["max_base_wrench"]
+    out.update(contact_check(res, model.pin_model))
     return out
 
 
@@ -213,5 +221,6 @@ def run_leap(robot: str | RobotConfig = "go2", solver: str = "ipopt",
     lp = build_leap(model, cfg, settings)
     res = lp.wb.solve(solver, opts, motion="leap", robot=cfg.name)
     res.summary = leap_summary(res, lp, model)
+    check_contacts(res)
     res.arrays["p_des"] = lp.p_des
     return res

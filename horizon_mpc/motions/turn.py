@@ -17,7 +17,13 @@ import numpy as np
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import ContactSchedule, base_rotation
 from horizon_mpc.model import RobotModel
-from horizon_mpc.motions.analysis import dynamics_check, roll_pitch_yaw, swing_intervals
+from horizon_mpc.motions.analysis import (
+    check_contacts,
+    contact_check,
+    dynamics_check,
+    roll_pitch_yaw,
+    swing_intervals,
+)
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import crawl_order, timeline_schedule
 from horizon_mpc.motions.settings import check_settings
@@ -177,6 +183,7 @@ def turn_summary(res: MotionResult, tp: TurnProblem, model: RobotModel,
     dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
     out["max_dynamics_defect"] = dyn["max_defect"]
     out["max_base_wrench"] = dyn["max_base_wrench"]
+    out.update(contact_check(res, model.pin_model))
     return out
 
 
@@ -196,4 +203,5 @@ def run_turn(robot: str | RobotConfig = "centauro", solver: str = "ipopt",
     tp = build_turn(model, cfg, settings)
     res = tp.wb.solve(solver, opts, motion="turn", robot=cfg.name)
     res.summary = turn_summary(res, tp, model)
+    check_contacts(res)
     return res

@@ -141,6 +141,9 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
 
     q, v = wp.q_nominal.copy(), np.zeros(model.nv)
     n_ticks = int(round(st.duration / dt))
+    if n_ticks < 2:  # one tick has no motion to measure (its figures were of the start)
+        raise ValueError(f"walk duration {st.duration:g} s is shorter than two MPC ticks of "
+                         f"{dt:g} s")
     Q, V, A, F, TAU, S = [q], [v], [], [], [], []
     tick_time, iterations, violation = [], [], []
     for i in range(n_ticks):
