@@ -159,12 +159,18 @@ def test_a_fixed_single_variable_is_the_same_at_every_node(codegen, where):
     assert ilqr.solution["x"][0, -1] == pytest.approx(1.0, abs=1e-9)
 
 
-def test_general_cost_is_refused():
-    prb = Problem(10)
+def _single_integrator(n: int):
+    """``x' = u`` (one state, one input), ``dt`` 0.1: (problem, x, u)."""
+    prb = Problem(n)
     x = prb.create_state_variable("x", 1)
     u = prb.create_input_variable("u", 1)
     prb.set_dynamics(u)
     prb.set_dt(0.1)
+    return prb, x, u
+
+
+def test_general_cost_is_refused():
+    prb, x, _ = _single_integrator(10)
     prb.create_general_cost("quartic", x**4)
     with pytest.raises(ValueError, match="general cost"):
         make_solver("ilqr", prb, OPTS)
@@ -530,11 +536,7 @@ def test_an_active_input_bound_is_never_called_converged_short_of_it(input_bound
     bound its multiplier (1.9) pressed it onto: complementarity was measured against
     lambda / rho, and rho had reached 1e9."""
     def build():
-        prb = Problem(20)
-        x = prb.create_state_variable("x", 1)
-        u = prb.create_input_variable("u", 1)
-        prb.set_dynamics(u)
-        prb.set_dt(0.1)
+        prb, x, u = _single_integrator(20)
         x.set_bounds(0, 0, nodes=0)
         prb.create_cost("track", x - 1, weight=1.0)
         prb.create_cost("effort", u, weight=0.01)
