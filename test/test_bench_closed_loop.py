@@ -130,11 +130,11 @@ def test_a_tiny_realtime_run_brings_the_mpc_process_figures_back(tmp_path):
     assert _finite(ticks["bootstrap_ms"]) and ticks["bootstrap_ms"] > 0
     b = ticks["breakdown_ms_mean"]
     assert all(_finite(b[k]) for k in bench.PHASES) and b["ilqr"] > 0
-    # in real time a plan arrives after its state: never before it, and some a sim clock step
-    # (4 ms at the 250 Hz states) later; with the ~1 ms latency of a prepared tick most
-    # arrive within the state's own step (age 0 on the sim clock)
+    # in real time a plan arrives after its state: never before it; with the ~1 ms latency of
+    # a prepared tick most arrive within the state's own sim clock step (4 ms at the 250 Hz
+    # states: age 0 on the sim clock), in a short run possibly all of them
     age = ticks["plan_age_ms"]
-    assert age["min"] >= 0 and age["mean"] > 0
+    assert age["min"] >= 0 and _finite(age["mean"]) and age["max"] < 100
     assert ticks["messages"]["joint_states"] > 0
     memory = on_disk["bench"]["memory_mb"]
     assert memory["process"].startswith("mpc_node") and memory["peak"] > 50
