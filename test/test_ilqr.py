@@ -8,6 +8,7 @@ from ocps import pendulum_swing_up
 from horizon_mpc import Problem, make_solver
 from horizon_mpc.examples import pendulum_dynamics
 from horizon_mpc.examples.cartpole import build_cartpole
+from horizon_mpc.model.liegroup import quat_multiply
 
 OPTS = {"codegen": False, "max_iter": 400}
 
@@ -475,26 +476,19 @@ def test_a_failed_prepare_does_not_keep_the_last_solves_success():
     assert solver.stats.success is False and solver.stats.status.startswith("prepare:")
 
 
-def _quat_mul(a, b):
-    ax, ay, az, aw = a[0], a[1], a[2], a[3]
-    bx, by, bz, bw = b[0], b[1], b[2], b[3]
-    return cs.vertcat(aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                      aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
 def _quat_manifold():
     q, q1, d = cs.SX.sym("q", 4), cs.SX.sym("q1", 4), cs.SX.sym("d", 3)
     n2 = cs.dot(d, d)
     n = cs.sqrt(cs.fmax(n2, 1e-12))
     half = cs.if_else(n2 < 1e-12, 0.5 - n2 / 48, cs.sin(n / 2) / n)
     exp = cs.vertcat(half * d, cs.if_else(n2 < 1e-12, 1 - n2 / 8, cs.cos(n / 2)))
-    r = _quat_mul(cs.vertcat(-q[:3], q[3]), q1)
+    r = quat_multiply(cs.vertcat(-q[:3], q[3]), q1)
     s = cs.if_else(r[3] < 0, -1, 1)
     v, w = s * r[:3], s * r[3]
     m2 = cs.dot(v, v)
     m = cs.sqrt(cs.fmax(m2, 1e-12))
     log = cs.if_else(m2 < 1e-12, 2 / w, 2 * cs.atan2(m, w) / m) * v
-    return (cs.Function("integrate", [q, d], [_quat_mul(q, exp)]),
+    return (cs.Function("integrate", [q, d], [quat_multiply(q, exp)]),
             cs.Function("difference", [q, q1], [log]))
 
 

@@ -96,14 +96,16 @@ def test_box_value_function_is_the_cost_to_go_of_the_clamped_policy():
     np.testing.assert_allclose(bw.s[0], Qx + K.T @ (Quu @ k + Qu) + Qux.T @ k, atol=1e-10)
 
 
-def _pendulum_mpc(u_max=4.0, N=30):
+def _pendulum_mpc(u_max=4.0, N=30, u_min=None):
+    """Pendulum tracking the angle parameter ``ref``, with ``u_min <= u <= u_max``
+    (``u_min`` default ``-u_max``)."""
     prb = Problem(N)
     x = prb.create_state_variable("x", 2)
     u = prb.create_input_variable("u", 1)
     ref = prb.create_parameter("ref", 1)
     prb.set_dynamics(cs.vertcat(x[1], pendulum_dynamics(x[0], x[1], u)))
     prb.set_dt(0.05)
-    u.set_bounds(-u_max, u_max)
+    u.set_bounds(-u_max if u_min is None else u_min, u_max)
     prb.create_cost("track", x[0] - ref, weight=5.0)
     prb.create_cost("velocity", x[1], weight=0.1)
     prb.create_cost("effort", u, weight=0.01)
@@ -217,16 +219,9 @@ def test_a_one_sided_bound_active_over_an_unstable_stretch_converges():
     over most of the horizon, the clamped policy's costates reached ~1e5 and a merit weight
     that only grew within the call rejected every later step (max_iter at cost 550)."""
     def build():
-        prb = Problem(60)
-        x = prb.create_state_variable("x", 2)
-        u = prb.create_input_variable("u", 1)
-        prb.set_dynamics(cs.vertcat(x[1], pendulum_dynamics(x[0], x[1], u)))
-        prb.set_dt(0.05)
+        prb, x, ref = _pendulum_mpc(np.inf, N=60, u_min=-3.0)
         x.set_bounds([0, 0], [0, 0], nodes=0)
-        u.set_bounds(-3.0, np.inf)
-        prb.create_cost("track", x[0] - np.pi, weight=5.0)
-        prb.create_cost("velocity", x[1], weight=0.1)
-        prb.create_cost("effort", u, weight=0.01)
+        ref.assign(np.pi)
         return prb
 
     ipopt = make_solver("ipopt", build())

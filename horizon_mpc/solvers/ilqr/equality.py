@@ -103,6 +103,14 @@ class EqualityLayout:
             term[:] = False
         return cls(own, nxt, term, np.where(eq, lb, 0.0), np.where(eqN, lbN, 0.0))
 
+    def nodes(self) -> np.ndarray:
+        """(N,) nodes whose input takes projected rows (own, of node k+1 or, at N-1, the
+        terminal ones): ``Projection.constrained`` before any row is stacked."""
+        nodes = self.own.any(axis=1) | self.next.any(axis=1)
+        if nodes.size:
+            nodes[-1] |= bool(self.term.any())
+        return nodes
+
     def stage_rows(self) -> np.ndarray:
         """(N, nc_con) rows of the stage layout handled by projection (own or from k-1)."""
         rows = self.own.copy()

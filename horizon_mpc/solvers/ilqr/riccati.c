@@ -464,6 +464,7 @@ int riccati_stack_rows(int N, int nu, int ndx, int nc, int m, int k, int j, int 
 #define lower_to_upper ISA(lower_to_upper)
 #define backward ISA(backward)
 #define box_qp ISA(box_qp)
+#define policy_cost_to_go ISA(policy_cost_to_go)
 #define qp_value ISA(qp_value)
 #define rollout ISA(rollout)
 #define project ISA(project)
@@ -792,6 +793,29 @@ static int box_qp(int n, const double *H, const double *q, const double *lo,
     }
 }
 
+/* S_i += K^T Q_uu K + K^T Q_ux + Q_ux^T K, as the symmetric part of K^T (Q_uu K + 2 Q_ux)
+ * (the symmetrisation at the end of the recursion's step takes it: one product fewer), and
+ * acc = K^T (Q_uu k + Q_u) + Q_ux^T k (s_i - Q_x): the cost-to-go of du = K dx + k for a K
+ * that is zero outside its nl live rows K_l (live: their inputs; Q_ll, Q_lx: Q_uu and Q_ux
+ * on them). T: nl x ndx workspace. A projected or box-constrained node's policy. */
+static void policy_cost_to_go(int nu, int ndx, int nl, const int *live, const double *Quu,
+                              const double *Qu, const double *Qux, const double *Qll,
+                              const double *Qlx, const double *Kl, const double *k,
+                              double *T, double *Si, double *acc)
+{
+    for (int c = 0; c < ndx; c++) acc[c] = 0.0;
+    if (nl) {
+        for (int p = 0; p < nl * ndx; p++) T[p] = 2.0 * Qlx[p];
+        gemm(nl, ndx, nl, Qll, nl, 1, Kl, ndx, T, ndx, 1);
+        gemm(ndx, ndx, nl, Kl, 1, ndx, T, ndx, Si, ndx, 1);
+    }
+    for (int a = 0; a < nl; a++) {
+        double va = dot(nu, Quu + (size_t)live[a] * nu, k) + Qu[live[a]];
+        axpy(ndx, va, Kl + (size_t)a * ndx, acc);
+    }
+    for (int a = 0; a < nu; a++) axpy(ndx, k[a], Qux + a * ndx, acc);
+}
+
 /* The recursion (see riccati_backward); w: workspace_size doubles, cols: nu ints. */
 static int backward(int N, int ndx, int nu, const double *const *in, const int64_t *st,
                     double mu, const uint8_t *con, const int *pat, double *const *out,
@@ -975,25 +999,12 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
             }
             copy(nu, Pe, ki);
             for (int a = 0; a < nl; a++) ki[live[a]] -= dot(r, Zc + a * r, wk);
-            /* S_i = Q_xx + K^T Q_uu K + K^T Q_ux + Q_ux^T K: the symmetric part of
-             * Q_xx + K^T (Q_uu K + 2 Q_ux), which the symmetrisation below takes (one
-             * product fewer), summed over the live inputs; s_i = Q_x + K^T (Q_uu k + Q_u)
-             * + Q_ux^T k */
-            for (int p = 0; p < nl * ndx; p++) T[p] = 2.0 * Qlx[p];
-            gemm(nl, ndx, nl, Qll, nl, 1, Kli, ndx, T, ndx, 1);
-            gemm(ndx, ndx, nl, Kli, 1, ndx, T, ndx, Si, ndx, 1);
-            for (int c = 0; c < ndx; c++) acc[c] = 0.0;
-            for (int a = 0; a < nl; a++) {
-                double va = dot(nu, Quu + (size_t)live[a] * nu, ki) + Qu[live[a]];
-                axpy(ndx, va, Kli + (size_t)a * ndx, acc);
-            }
-            for (int a = 0; a < nu; a++) axpy(ndx, ki[a], Qux + a * ndx, acc);
+            policy_cost_to_go(nu, ndx, nl, live, Quu, Qu, Qux, Qll, Qlx, Kli, ki, T, Si, acc);
         } else if (in[IN_BLO] && boxed(nu, EL(IN_BLO, i, 0, 0), EL(IN_BHI, i, 0, 0),
                                        st[3 * IN_BLO + 1], st[3 * IN_BHI + 1])) {
             /* the box of du: k from box_qp, K = -Q_ff^-1 Q_fx on its free inputs (zero rows
              * for the clamped ones); S_i, s_i the cost-to-go of that policy, as with a
-             * projection: Q_xx + K^T (Q_uu K + 2 Q_ux) (symmetric part), Q_x + K^T (Q_uu k
-             * + Q_u) + Q_ux^T k, over the free inputs */
+             * projection */
             get_vec(nu, EL(IN_BLO, i, 0, 0), st[3 * IN_BLO + 1], blo);
             get_vec(nu, EL(IN_BHI, i, 0, 0), st[3 * IN_BHI + 1], bhi);
             int nl = 0;
@@ -1002,24 +1013,14 @@ static int backward(int N, int ndx, int nu, const double *const *in, const int64
                 return 1;
             }
             for (int p = 0; p < nu * ndx; p++) Ki[p] = 0.0;
-            for (int c = 0; c < ndx; c++) acc[c] = 0.0;
-            if (nl) {
-                for (int a = 0; a < nl; a++)
-                    for (int c = 0; c < ndx; c++) Kl[a * ndx + c] = -Qux[(size_t)live[a] * ndx + c];
-                chol_solve(nl, U, ndx, Kl, ndx);
-                for (int a = 0; a < nl; a++) {
-                    copy(ndx, Kl + (size_t)a * ndx, Ki + (size_t)live[a] * ndx);
-                    for (int b = 0; b < nl; b++) Quul[a * nl + b] = Quu[live[a] * nu + live[b]];
-                    for (int c = 0; c < ndx; c++) T[a * ndx + c] = 2.0 * Qux[(size_t)live[a] * ndx + c];
-                }
-                gemm(nl, ndx, nl, Quul, nl, 1, Kl, ndx, T, ndx, 1);
-                gemm(ndx, ndx, nl, Kl, 1, ndx, T, ndx, Si, ndx, 1);
-                for (int a = 0; a < nl; a++) {
-                    double va = dot(nu, Quu + (size_t)live[a] * nu, ki) + Qu[live[a]];
-                    axpy(ndx, va, Kl + (size_t)a * ndx, acc);
-                }
+            for (int a = 0; a < nl; a++) {
+                for (int c = 0; c < ndx; c++) Kl[a * ndx + c] = -Qux[(size_t)live[a] * ndx + c];
+                for (int b = 0; b < nl; b++) Quul[a * nl + b] = Quu[live[a] * nu + live[b]];
+                copy(ndx, Qux + (size_t)live[a] * ndx, Quxl + (size_t)a * ndx);
             }
-            for (int a = 0; a < nu; a++) axpy(ndx, ki[a], Qux + a * ndx, acc);
+            if (nl) chol_solve(nl, U, ndx, Kl, ndx);
+            for (int a = 0; a < nl; a++) copy(ndx, Kl + (size_t)a * ndx, Ki + (size_t)live[a] * ndx);
+            policy_cost_to_go(nu, ndx, nl, live, Quu, Qu, Qux, Quul, Quxl, Kl, ki, T, Si, acc);
         } else {
             /* K = -Q_uu^-1 Q_ux, k = -Q_uu^-1 Q_u; S_i = Q_xx + Q_ux^T K, s_i = Q_x + Q_ux^T k */
             lower_to_upper(nu, Quu, nu, U);
@@ -1305,6 +1306,7 @@ done:
 #undef lower_to_upper
 #undef backward
 #undef box_qp
+#undef policy_cost_to_go
 #undef qp_value
 #undef rollout
 #endif

@@ -93,6 +93,14 @@ def box_qp(H: np.ndarray, q: np.ndarray, lo: np.ndarray,
     return x, free, chol
 
 
+def _cost_to_go(Qx, Qu, Qxx, Quu, Qux, K, k) -> tuple[np.ndarray, np.ndarray]:
+    """``(S, s)`` of the policy ``du = K dx + k`` in the Q-function (any K, k: a projected
+    or box-constrained node's; the unconstrained optimum simplifies it)."""
+    S = Qxx + K.T @ (Quu @ K + Qux) + Qux.T @ K
+    s = Qx + K.T @ (Quu @ k + Qu) + Qux.T @ k
+    return S, s
+
+
 def _boxed(box: tuple[np.ndarray, np.ndarray] | None, i: int) -> bool:
     """Whether node ``i`` has a finite input bound in ``box``."""
     return box is not None and bool(np.isfinite(box[0][i]).any()
@@ -145,9 +153,7 @@ def backward_pass(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
             rhs = Z.T @ np.column_stack((Qux + Quu @ Px, Qu + Quu @ Pe))
             sol = Z @ cho_solve(chol, rhs, check_finite=False)
             Ki, ki = Px - sol[:, :ndx], Pe - sol[:, ndx]
-            QuuK = Quu @ Ki
-            Si = Qxx + Ki.T @ (QuuK + Qux) + Qux.T @ Ki
-            si = Qx + Ki.T @ (Quu @ ki + Qu) + Qux.T @ ki
+            Si, si = _cost_to_go(Qx, Qu, Qxx, Quu, Qux, Ki, ki)
         elif _boxed(box, i):
             qp = box_qp(Quu, Qu, box[0][i], box[1][i])
             if qp is None:
@@ -156,8 +162,7 @@ def backward_pass(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
             Ki = np.zeros((nu, ndx))
             if chol is not None:
                 Ki[free] = -cho_solve(chol, Qux[free], check_finite=False)
-            Si = Qxx + Ki.T @ (Quu @ Ki + Qux) + Qux.T @ Ki
-            si = Qx + Ki.T @ (Quu @ ki + Qu) + Qux.T @ ki
+            Si, si = _cost_to_go(Qx, Qu, Qxx, Quu, Qux, Ki, ki)
         else:
             try:
                 chol = cho_factor(Quu, lower=True, check_finite=False)

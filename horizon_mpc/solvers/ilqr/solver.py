@@ -201,7 +201,9 @@ class IlqrSolver(Solver):
         self.timings: dict[str, float] = {}
         self._prepared: tuple | None = None  # (evaluation, LQ step, info) of prepare()
         self._box: tuple[np.ndarray, np.ndarray] | None = None  # see _set_box
-        self._box_du: tuple[np.ndarray, np.ndarray] | None = None  # see _box_step
+        # the box of the step (see _box_step): the compiled LQ step's bound arrays
+        self._box_du = ((self._lq.box_lo, self._lq.box_hi) if self._lq is not None else
+                        (np.zeros((N, m.nu)), np.zeros((N, m.nu))))
 
     # ------------------------------------------------------------------ problem data
     def _gather(self) -> None:
@@ -295,10 +297,7 @@ class IlqrSolver(Solver):
         finite = np.isfinite(ulb) | np.isfinite(uub)
         if not finite.any():
             return
-        lay = self._layout
-        projected = lay.own.any(axis=1) | lay.next.any(axis=1)
-        projected[-1] |= bool(lay.term.any())
-        nodes = finite.any(axis=0) & ~projected
+        nodes = finite.any(axis=0) & ~self._layout.nodes()
         if not nodes.any():
             return
         box_lb = np.where(nodes[:, None], ulb.T, -np.inf)
@@ -308,15 +307,12 @@ class IlqrSolver(Solver):
         np.clip(self.U, box_lb, box_ub, out=self.U)
 
     def _box_step(self) -> bool:
-        """The box of the step ``du`` at the current inputs, where the LQ step reads it
-        (the compiled one's arrays, or ``self._box_du``); whether there is one."""
+        """The box of the step ``du`` at the current inputs into ``self._box_du`` (the
+        compiled LQ step reads the same arrays); whether there is one."""
         if self._box is None:
             return False
-        lo, hi = (self._lq.box_lo, self._lq.box_hi) if self._lq is not None else (
-            np.empty_like(self.U), np.empty_like(self.U))
-        np.subtract(self._box[0], self.U, out=lo)
-        np.subtract(self._box[1], self.U, out=hi)
-        self._box_du = (lo, hi)
+        np.subtract(self._box[0], self.U, out=self._box_du[0])
+        np.subtract(self._box[1], self.U, out=self._box_du[1])
         return True
 
     def _weights(self) -> tuple[np.ndarray, np.ndarray]:
