@@ -22,6 +22,7 @@ import numpy as np
 
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings, WalkingProblem, build_walking_problem, make_gait
+from horizon_mpc.locomotion.pose_reference import advance_pose, base_yaw, horizon_poses
 from horizon_mpc.model import RobotModel
 from horizon_mpc.motions.analysis import dynamics_check
 from horizon_mpc.motions.result import MotionResult
@@ -42,7 +43,9 @@ class WalkSettings:
     duration: float = 4.0  # s of motion (ticks = duration / dt of the walking problem)
     velocity: list[float] = field(default_factory=lambda: [0.3, 0.0, 0.0])  # vx, vy, wz
     iterations: int = 3  # ILQR real-time iterations per tick
-    bootstrap_iterations: int = 50  # the first horizon is solved to convergence
+    # the first horizon is solved to convergence: 15-335 iterations for the 8 quadrupeds with
+    # configs and three commands (go2 turning in place 335; doc/motions.md)
+    bootstrap_iterations: int = 500
     nlp_max_iter: int = 30  # IPOPT / GN-SQP iterations per tick (warm started)
     average_cycles: int = 2  # gait cycles at the end over which the velocity is averaged
     w_touchdown: float = 1e6  # ILQR: touch-down height cost (1/m^2; the NLPs: a constraint)
@@ -68,8 +71,10 @@ class WalkSettings:
 
 
 def _solver_options(solver: str, st: WalkSettings, mpc: MpcSettings) -> dict[str, Any]:
-    if solver == "ilqr":
-        return {"rti": True, "iterations_per_call": st.iterations, "rho_init": mpc.rho_init}
+    if solver == "ilqr":  # the inequality rows as the walking MPC treats them (its settings)
+        return {"rti": True, "iterations_per_call": st.iterations, "rho_init": mpc.rho_init,
+                "inequality": mpc.inequality, "barrier_mu": mpc.barrier_mu,
+                "barrier_delta": mpc.barrier_delta}
     if solver == "ipopt":  # rows on every valid node: the schedule moves between solves
         return {"max_iter": st.nlp_max_iter, "tol": 1e-6}
     # qrqp (gnsqp's default) needs minutes per QP at this size, osqp a fraction of a second;
@@ -81,23 +86,6 @@ def _solver_options(solver: str, st: WalkSettings, mpc: MpcSettings) -> dict[str
 #: largest dynamics defect (per unit of the state) and base wrench (per unit of the weight) of
 #: an executed walk that counts as physically consistent
 CONSISTENCY = 1e-6
-
-
-def _pose_reference(q: np.ndarray, cmd: np.ndarray, n_nodes: int, dt: float) -> np.ndarray:
-    """(4, N+1) x, y, cos(yaw), sin(yaw) integrated along the command from the pose ``q``."""
-    x, y, z, w = q[3:7]
-    yaw0 = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    vx, vy, wz = cmd
-    k = dt * np.arange(n_nodes + 1)
-    yaw = yaw0 + wz * k
-    if abs(wz) > 1e-9:  # exact integration of a constant planar twist
-        sx = (np.sin(yaw) - math.sin(yaw0)) / wz
-        cx = (math.cos(yaw0) - np.cos(yaw)) / wz
-        px, py = q[0] + vx * sx - vy * cx, q[1] + vx * cx + vy * sx
-    else:
-        c, s = math.cos(yaw0), math.sin(yaw0)
-        px, py = q[0] + k * (c * vx - s * vy), q[1] + k * (s * vx + c * vy)
-    return np.vstack([px, py, np.cos(yaw), np.sin(yaw)])
 
 
 def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
@@ -146,8 +134,13 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
                          f"{dt:g} s")
     Q, V, A, F, TAU, S = [q], [v], [], [], [], []
     tick_time, iterations, violation = [], [], []
+    # the pose reference integrates the command from the start pose (within the leash of
+    # the measured pose): the integral action of the walking MPC (WalkingMpc)
+    pose = np.array([q[0], q[1], base_yaw(q)])
     for i in range(n_ticks):
-        _set_tick(wp, touchdown, q, v, cmd, gait.schedule(i * dt, N, dt))
+        if i:
+            pose = advance_pose(pose, cmd, q, dt, mpc.pose_leash, mpc.yaw_leash)
+        _set_tick(wp, touchdown, q, v, cmd, pose, gait.schedule(i * dt, N, dt))
         first = i == 0
         if first:  # bootstrap: the first horizon to convergence
             if solver == "ilqr":
@@ -209,15 +202,16 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
 
 
 def _set_tick(wp: WalkingProblem, touchdown: dict, q: np.ndarray, v: np.ndarray,
-              cmd: np.ndarray, sched) -> None:
-    """Measured state on node 0, pose reference from it, contact schedule of the horizon
+              cmd: np.ndarray, pose: np.ndarray, sched) -> None:
+    """Measured state on node 0, pose reference from ``pose`` (x, y, yaw) along ``cmd``,
+    contact schedule of the horizon
     (feet on the ground at touch-down; a foot pushes only over intervals it is down at both
     ends of, not over the one in which it lifts off)."""
     wp.q.set_bounds(q, q, nodes=0)
     wp.v.set_bounds(v, v, nodes=0)
     wp.q.set_initial_guess(q, nodes=0)
     wp.v.set_initial_guess(v, nodes=0)
-    wp.pose_ref.assign(_pose_reference(q, cmd, wp.n_nodes, wp.settings.dt))
+    wp.pose_ref.assign(horizon_poses(pose, cmd, wp.n_nodes, wp.settings.dt))
     st = np.asarray(sched.stance, bool)
     wp.contacts.set_schedule(st, sched.swing_height())
     loaded = st[:, :-1] & st[:, 1:]

@@ -19,6 +19,12 @@ import pinocchio as pin
 from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings, build_walking_problem, make_gait
+from horizon_mpc.locomotion.pose_reference import (
+    advance_pose,
+    base_yaw,
+    horizon_poses,
+    wrap_angle,
+)
 from horizon_mpc.model import RobotModel
 from horizon_mpc.mpc.schedule import GaitScheduler
 from horizon_mpc.solvers import make_solver
@@ -147,7 +153,7 @@ class WalkingMpc:
         # feet frames may sit above the ground (foot radius): keep the height above them
         lowest_nominal = min(float(fn(wp.q_nominal)[0][2]) for fn in fk)
         wp.height_ref.assign(wp.base_height - lowest_nominal + float(np.mean(self.ground_z)))
-        self.pose_ref = np.array([q[0], q[1], _yaw(q)])
+        self.pose_ref = np.array([q[0], q[1], base_yaw(q)])
         self.cmd[:] = 0.0
         self.scheduler.reset(t)
         wp.standing_guess(q)
@@ -298,8 +304,8 @@ class WalkingMpc:
         x0, y0, yaw0 = self._pose_expected
         dt = abs(t - self.t_last)
         dist = math.hypot(x - x0, y - y0)
-        yaw = _yaw(q)  # atan2 of the quaternion: no unit norm needed
-        dyaw = abs(_wrap(yaw - yaw0)) if math.isfinite(yaw) else 0.0
+        yaw = base_yaw(q)  # atan2 of the quaternion: no unit norm needed
+        dyaw = abs(wrap_angle(yaw - yaw0)) if math.isfinite(yaw) else 0.0
         jump = self.settings.pose_jump
         if dist > jump + 2.0 * dt or dyaw > jump + 3.0 * dt:
             return (f"the measured base pose is {dist:.3f} m / {dyaw:.3f} rad off the plan's "
@@ -398,38 +404,15 @@ class WalkingMpc:
             self.cmd[i] += min(max(target - self.cmd[i], -step), step)
 
     def _advance_pose_ref(self, q: np.ndarray, dt: float) -> None:
-        # three numbers: plain floats (numpy's per-call overhead dominates here)
-        x, y, yaw = self.pose_ref.tolist()
-        vx, vy, wz = self.cmd.tolist()
-        qx, qy = float(q[0]), float(q[1])
-        c, s = math.cos(yaw), math.sin(yaw)
-        x, y, yaw = x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz
-        # never wind up: keep the reference within reach of the measured pose
-        leash, yaw_leash = self.settings.pose_leash, self.settings.yaw_leash
-        dist = math.hypot(x - qx, y - qy)
-        if dist > leash:
-            x, y = qx + (x - qx) * leash / dist, qy + (y - qy) * leash / dist
-        yaw_q = _yaw(q)
-        yaw = yaw_q + min(max(_wrap(yaw - yaw_q), -yaw_leash), yaw_leash)
-        self.pose_ref = np.array([x, y, yaw])
+        st = self.settings
+        self.pose_ref = advance_pose(self.pose_ref, self.cmd, q, dt, st.pose_leash, st.yaw_leash)
 
     def _set_references(self, t: float) -> None:
         wp, st = self.wp, self.settings
         N, dt = wp.n_nodes, st.dt
         vx, vy, wz = self.cmd
         wp.v_ref.assign([vx, vy, 0.0, 0.0, 0.0, wz])
-        k = np.arange(N + 1) * dt
-        yaw = self.pose_ref[2] + wz * k
-        if abs(wz) > 1e-6:  # exact integration of a constant twist in the plane
-            sx = (np.sin(yaw) - math.sin(self.pose_ref[2])) / wz
-            cx = (np.cos(self.pose_ref[2]) - np.cos(yaw)) / wz
-            px = self.pose_ref[0] + vx * sx - vy * cx
-            py = self.pose_ref[1] + vx * cx + vy * sx
-        else:
-            c, s = math.cos(yaw[0]), math.sin(yaw[0])
-            px = self.pose_ref[0] + k * (c * vx - s * vy)
-            py = self.pose_ref[1] + k * (s * vx + c * vy)
-        wp.pose_ref.assign(np.vstack([px, py, np.cos(yaw), np.sin(yaw)]))
+        wp.pose_ref.assign(horizon_poses(self.pose_ref, self.cmd, N, dt))
         sched = self.scheduler.schedule(t, N, dt)
         self._set_stance(sched.stance)
         wp.contacts.set_swing_height(self.ground_z[:, None] + sched.swing_height())
@@ -479,13 +462,4 @@ def _stats_dict(stats: SolverStats) -> dict:
 
 
 def _pose(q: np.ndarray) -> tuple[float, float, float]:
-    return float(q[0]), float(q[1]), _yaw(q)
-
-
-def _yaw(q: np.ndarray) -> float:
-    x, y, z, w = q[3:7].tolist()
-    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
+    return float(q[0]), float(q[1]), base_yaw(q)
