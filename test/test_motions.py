@@ -62,6 +62,17 @@ def test_timeline_sampling_puts_lift_off_and_touchdown_nodes_in_stance():
     assert [n.tolist() for n in lift_off_nodes(s.stance)] == [[2], []]
 
 
+@pytest.mark.parametrize("intervals", [3, 5, 7])
+def test_a_swing_over_an_odd_number_of_intervals_reaches_its_apex_on_the_nodes(intervals):
+    # no node at mid-swing: the apex used to be 0.79 (3 intervals) / 0.92 (5) of the height
+    s = timeline_schedule([[(0.1, 0.1 + 0.1 * intervals)]], n_nodes=10, dt=0.1,
+                          step_height=0.1)
+    h = s.swing_height()[0]
+    assert h.max() == pytest.approx(0.1) and np.sum(np.isclose(h, 0.1)) == 2
+    assert np.all(np.diff(h[:np.argmax(h) + 1]) >= 0)  # up, then down
+    assert np.all(np.diff(h[np.argmax(h) + 1:]) <= 0)
+
+
 @pytest.mark.parametrize("swings, match", [
     ([[(0.2, 0.25)]], "fewer than two"),
     ([[(0.2, 0.6), (0.5, 0.9)]], "overlaps"),
@@ -418,14 +429,38 @@ def test_turn_swing_feet_reach_the_clearance_height(turn):
 # ---- walk
 
 @pytest.mark.slow
-def test_walk_average_velocity_over_the_last_cycles_is_within_10_percent(walk):
+def test_walk_average_velocity_over_the_last_cycles_is_within_3_percent(walk):
     res, st, _ = walk
     period = make_gait("trot").period
     n = int(round(st.average_cycles * period / res.dt))
     assert res.n_nodes >= 3 * n  # the average leaves out the start
     vx = res.v[0, -n - 1:-1].mean()  # base frame, forward
-    assert abs(vx - st.velocity[0]) <= 0.1 * st.velocity[0]
+    # measured 0.6 % (the pose reference integrates the command; 7.8 % below when it
+    # restarted from the current pose at every tick)
+    assert abs(vx - st.velocity[0]) <= 0.03 * st.velocity[0]
     assert abs(res.v[1, -n - 1:-1].mean()) <= 0.02 * st.velocity[0]
+
+
+@pytest.mark.slow
+def test_walk_turning_in_place_converges_its_first_horizon_and_tracks_the_yaw_rate(go2):
+    """The first horizon of go2 turning in place takes 335 iterations (a cap of 50 had it
+    'NOT solved')."""
+    cfg, model = go2
+    st = _settings("walk", WalkSettings, "go2", velocity=[0.0, 0.0, 0.5], duration=2.0)
+    res = run_walk(cfg, "ilqr", st, model=model)
+    assert res.stats["success"], res.stats["status"]
+    assert res.summary["velocity_error"] <= 0.05  # measured 0.015
+
+
+@pytest.mark.slow
+def test_walk_of_another_robot_is_solved_and_tracks():
+    """go1 with its config only: its first horizon never converged with the augmented
+    Lagrangian on the inequality rows (max_iter at 50, 100, 300 iterations); with the
+    walking MPC's barrier in 19, and it walks within 3 % of the reference."""
+    cfg = load_robot_config("go1")
+    res = run_walk(cfg, "ilqr", _settings("walk", WalkSettings, "go1"))
+    assert res.stats["success"], res.stats["status"]
+    assert res.summary["velocity_error"] <= 0.05  # measured 0.021
 
 
 @pytest.mark.slow
@@ -512,6 +547,10 @@ def test_outputs_hold_the_solution_figures_animation_and_summary(walk, tmp_path)
     assert summary["motion"] == "walk" and summary["solver"] == "ilqr"
     assert summary["results"]["velocity_error"] == pytest.approx(
         res.summary["velocity_error"])
+    # a run without the animation into the same folder leaves no GIF of the earlier run
+    files = write_outputs(res, load_robot_config("go2"), tmp_path, animation=False)
+    assert not (tmp_path / "animation.gif").exists() and "animation" not in files
+    assert "animation" not in json.loads(files["summary"].read_text())["files"]
 
 
 @pytest.mark.slow
