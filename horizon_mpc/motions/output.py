@@ -89,10 +89,14 @@ def write_outputs(res: MotionResult, cfg: RobotConfig, out: str | Path,
              "contact_forces": plot_contact_forces(res, out / "contact_forces.png"),
              "base_and_torques": plot_base_and_torques(res, out / "base_and_torques.png",
                                                        effort_limit)}
+    gif = out / "animation.gif"
     if animation:
         from horizon_mpc.motions.animation import write_animation
 
-        files["animation"] = write_animation(res, cfg, out / "animation.gif", **render)
+        files["animation"] = write_animation(res, cfg, gif, **render)
+    elif gif.is_file():  # an earlier run's animation would pass for this motion's
+        gif.unlink()
+        log.info("%s: removed the earlier run's %s (no animation this run)", res.motion, gif)
     files["summary"] = write_summary(
         res, out / "summary.json",
         {**(extra or {}), "files": {k: p.name for k, p in files.items()}})
