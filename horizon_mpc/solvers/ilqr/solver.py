@@ -89,8 +89,13 @@ class IlqrSolver(Solver):
     feasible; see :mod:`.lagrangian`);
     ``input_bounds``: ``'box'`` (bounds of the inputs kept by the backward pass: a
     box-constrained QP per node and clamped rollouts, control-limited DDP; at nodes with
-    projected equality rows they go through the augmented Lagrangian) or ``'lagrangian'``
-    (every node's through the augmented Lagrangian, as the other bounds);
+    projected equality rows they go through the augmented Lagrangian), ``'lagrangian'``
+    (every node's through the augmented Lagrangian, as the other bounds) or ``'auto'``
+    (the default: a converging solve starts with ``'lagrangian'``, robust far from the
+    solution, and goes on with ``'box'`` from its current iterate when it has not converged
+    after ``box_after`` iterations, where the augmented Lagrangian's active set of the input
+    bounds stalls; real-time calls, and the barrier's (``inequality='barrier'``), keep
+    ``'lagrangian'``: the bounds in the barrier);
     ``line_search``: False takes every full step (the classic real-time iteration of an
     MPC, where the next tick corrects the linearisation error); a step whose evaluation is
     not finite is still rejected.
@@ -98,7 +103,7 @@ class IlqrSolver(Solver):
 
     name = "ilqr"
     DEFAULTS: dict[str, Any] = {
-        "max_iter": 100,
+        "max_iter": 300,
         "rti": False,
         "iterations_per_call": 1,
         "tol": 1e-8,
@@ -120,7 +125,8 @@ class IlqrSolver(Solver):
         "al_max_inner": 10,
         "rti_multiplier_update": True,
         "inequality": "lagrangian",
-        "input_bounds": "lagrangian",
+        "input_bounds": "auto",
+        "box_after": 20,
         "barrier_mu": 1.0,
         "barrier_delta": 1.0,
     }
@@ -130,9 +136,11 @@ class IlqrSolver(Solver):
         if self.opts["equality"] not in ("projection", "lagrangian"):
             raise ValueError(f"ilqr option 'equality' must be 'projection' or 'lagrangian', "
                              f"got {self.opts['equality']!r}")
-        if self.opts["input_bounds"] not in ("box", "lagrangian"):
-            raise ValueError(f"ilqr option 'input_bounds' must be 'box' or 'lagrangian', "
-                             f"got {self.opts['input_bounds']!r}")
+        if self.opts["input_bounds"] not in ("auto", "box", "lagrangian"):
+            raise ValueError(f"ilqr option 'input_bounds' must be 'auto', 'box' or "
+                             f"'lagrangian', got {self.opts['input_bounds']!r}")
+        self._auto_box = False  # 'auto': this call went on with the box (_switch_to_box)
+        self._box_from: int | None = None
         self.model = build_stage_model(prb, codegen=bool(self.opts["codegen"]),
                                        projected_equalities=self.opts["equality"] == "projection")
         m = self.model
@@ -292,7 +300,7 @@ class IlqrSolver(Solver):
         then stay inside). ``ulb``, ``uub``: (nu, N) input bounds."""
         self._box = None
         m = self.model
-        if self.opts["input_bounds"] != "box" or not m.nu:
+        if not m.nu or not (self.opts["input_bounds"] == "box" or self._auto_box):
             return
         finite = np.isfinite(ulb) | np.isfinite(uub)
         if not finite.any():
@@ -305,6 +313,28 @@ class IlqrSolver(Solver):
         lb[nodes, -m.nu:], ub[nodes, -m.nu:] = -np.inf, np.inf
         self._box = (box_lb, box_ub)
         np.clip(self.U, box_lb, box_ub, out=self.U)
+
+    def _switch_to_box(self, ev: dict[str, Any]) -> dict[str, Any] | None:
+        """``input_bounds='auto'``: go on from the current iterate with the input bounds kept
+        by the backward pass (the problem read again, those rows out of the augmented
+        Lagrangian, the inputs clipped into them, the regularisation reset). Returns the
+        evaluation to go on with: ``ev`` itself when there is no input bound to keep."""
+        prb = self.prb
+        if not (np.isfinite(prb.stacked("input", "lower_bounds", copy=False)).any()
+                or np.isfinite(prb.stacked("input", "upper_bounds", copy=False)).any()):
+            return ev
+        X, U = self.X, self.U
+        self._auto_box = True
+        self._gather()
+        self.X, self.U = X, U
+        if self._box is None:  # bounds only at nodes with projected rows: as they were
+            self._auto_box = False
+            self._gather()
+            self.X, self.U = X, U
+            return ev
+        np.clip(self.U, self._box[0], self._box[1], out=self.U)
+        self.mu = self.opts["mu_init"]
+        return self._evaluate(self.X, self.U)
 
     def _box_step(self) -> bool:
         """The box of the step ``du`` at the current inputs into ``self._box_du`` (the
@@ -596,6 +626,8 @@ class IlqrSolver(Solver):
         self.timings = {}
         self._nu = 0.0
         self._prepared = None
+        self._auto_box = False
+        self._box_from = None
         self._gather()
         return self._evaluate(self.X, self.U)
 
@@ -697,6 +729,14 @@ class IlqrSolver(Solver):
             if info.get("linearisation_failed"):
                 status = "linearisation not finite (NaN/Inf) at every regularisation"
                 break
+            if (not rti and it == o["box_after"] and o["input_bounds"] == "auto"
+                    and o["inequality"] == "lagrangian" and it < n_iter):
+                ev = self._switch_to_box(ev)
+                self._box_from = it if self._auto_box else None
+                if ev is None:
+                    status = "not finite after the switch to the box"
+                    break
+                inner = 0
             # never start an iteration that would not end within the budget (its cost
             # estimated by the last one's)
             now = time.perf_counter()
@@ -726,6 +766,8 @@ class IlqrSolver(Solver):
         self.stats.cost = ev["cost"] if ev else math.nan
         self.stats.constraint_violation = ev["viol"] if ev else math.nan
         self.stats.extra = {"mu": self.mu, "timings": dict(self.timings)}
+        if self._box_from is not None:  # 'auto': the iteration after which the box took over
+            self.stats.extra["box_from"] = self._box_from
         # a failed start returns the point it failed at (the guesses), as the NLP solvers
         # do: never an empty or a previous solve's solution
         self._split_solution(self.X.T.copy(), self.U.T.copy(), self.S)
