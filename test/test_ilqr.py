@@ -550,3 +550,36 @@ def test_an_active_input_bound_is_never_called_converged_short_of_it(input_bound
         assert ilqr.stats.cost == pytest.approx(ipopt.stats.cost, rel=1e-5)
     else:
         assert ilqr.stats.status == "max_iter"
+
+
+def _two_inputs_alike(coefficient: float, integrator: str = "rk4"):
+    """x'' = u0 + c u1 from rest to rest at 1 in 2 s: both final rows move through the one
+    combination u0 + c u1 at node N-1, so they are dependent in the inputs there."""
+    prb = Problem(40)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 2)
+    prb.set_dynamics(cs.vertcat(x[1], u[0] + coefficient * u[1]))
+    prb.set_dt(0.05)
+    prb.transcribe("multiple_shooting", integrator=integrator)
+    x.set_bounds([0, 0], [0, 0], nodes=0)
+    prb.create_cost("effort", u, weight=0.01)
+    prb.create_final_constraint("goal", x - [1.0, 0.0])
+    return prb
+
+
+@pytest.mark.parametrize("coefficient, codegen", [(1.0, False), (1.0, True), (0.5, True)])
+def test_projected_rows_dependent_in_the_inputs_go_to_the_augmented_lagrangian(coefficient,
+                                                                               codegen):
+    """The final position and velocity were both projected onto node N-1's two inputs, whose
+    Jacobian there has rank 1: the projection met them in the least-squares sense only, the
+    augmented Lagrangian did not see them, and the solve stalled at max_iter with the goal
+    97.5 % unmet (IPOPT and equality='lagrangian': 6 iterations). Now those rows go back to
+    the augmented Lagrangian: 6 iterations, IPOPT's optimum."""
+    ok_i, ipopt = _solve(_two_inputs_alike(coefficient), "ipopt")
+    ok_l, ilqr = _solve(_two_inputs_alike(coefficient), "ilqr", {"codegen": codegen})
+    assert ok_i and ok_l, ilqr.stats.status
+    assert ilqr.stats.iterations <= 20
+    assert ilqr.stats.cost == pytest.approx(ipopt.stats.cost, rel=1e-6)
+    np.testing.assert_allclose(ilqr.solution["x"][:, -1], [1.0, 0.0], atol=1e-6)
+    # the next call of the same solver starts from the projected layout again
+    assert ilqr.solve() and ilqr.stats.iterations <= 3

@@ -111,6 +111,16 @@ class EqualityLayout:
             nodes[-1] |= bool(self.term.any())
         return nodes
 
+    def without_nodes(self, nodes: np.ndarray) -> EqualityLayout:
+        """This layout without the rows projected at ``nodes`` ((N,) bool): their own rows,
+        those of node k+1 and, at N-1, the terminal ones (they go back to the augmented
+        Lagrangian)."""
+        own, nxt, term = self.own.copy(), self.next.copy(), self.term.copy()
+        own[nodes], nxt[nodes] = False, False
+        if nodes.size and nodes[-1]:
+            term[:] = False
+        return EqualityLayout(own, nxt, term, self.b, self.bN)
+
     def stage_rows(self) -> np.ndarray:
         """(N, nc_con) rows of the stage layout handled by projection (own or from k-1)."""
         rows = self.own.copy()
@@ -125,7 +135,8 @@ class Projection:
     Shapes: P_e (N, nu), P_x (N, nu, ndx), Z (N, nu, nu) (columns of the range of D^T are
     zero), free (N, nu) (1 for null-space columns), pinv (N, nu, m) and ``rows`` (N, m) the
     mask of real rows; ``constrained`` (N,) marks nodes with at least one row;
-    ``rank_deficient`` counts nodes whose rows could not all be met (least squares).
+    ``rank_deficient`` counts nodes whose rows could not all be met (least squares), and
+    ``unmet`` (N,) marks them (None: not computed, no projected row).
     """
 
     P_e: np.ndarray
@@ -136,6 +147,13 @@ class Projection:
     rows: np.ndarray
     constrained: np.ndarray
     rank_deficient: int
+    unmet: np.ndarray | None = None
+
+    def dependent(self) -> np.ndarray:
+        """(N,) nodes whose rows are (nearly) dependent in the input (rank below the number
+        of rows: the projection keeps fewer directions than rows)."""
+        rank = self.free.shape[1] - np.count_nonzero(self.free, axis=1)
+        return np.count_nonzero(self.rows, axis=1) > rank
 
 
 _METHODS = ("qr", "qr-numpy", "svd")
@@ -188,7 +206,7 @@ def project(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarra
     else:
         sol = _qr_solve(W_flat, rows, nu, rtol, compiled=compiled)
     return Projection(sol.P_e, sol.P_x, sol.Z, sol.free, sol.pinv, rows, rows.any(axis=1),
-                      int(np.count_nonzero(sol.unmet)))
+                      int(np.count_nonzero(sol.unmet)), np.asarray(sol.unmet, bool))
 
 
 def _compiled() -> bool:

@@ -140,6 +140,9 @@ class IlqrSolver(Solver):
             raise ValueError(f"ilqr option 'input_bounds' must be 'auto', 'box' or "
                              f"'lagrangian', got {self.opts['input_bounds']!r}")
         self._auto_box = False  # 'auto': this call went on with the box (_switch_to_box)
+        # nodes whose projected rows went back to the augmented Lagrangian (_demote_dependent;
+        # for the solver's life: a warm re-solve keeps their multipliers)
+        self._demoted = np.zeros(prb.n_nodes, bool)
         self._box_from: int | None = None
         self.model = build_stage_model(prb, codegen=bool(self.opts["codegen"]),
                                        projected_equalities=self.opts["equality"] == "projection")
@@ -273,6 +276,8 @@ class IlqrSolver(Solver):
             self._layout = EqualityLayout.from_bounds(
                 lb[:, :nc], ub[:, :nc], self._uses_input, lbN[0, :ncN], ubN[0, :ncN], m.nu,
                 m.con_reach, m.conN_reach)
+            if self._demoted.any() and not self.opts["rti"]:  # see _demote_dependent
+                self._layout = self._layout.without_nodes(self._demoted)
             self._eq_rows = self._layout.stage_rows()
             # projected rows leave the augmented Lagrangian
             lb[:, :nc][self._eq_rows], ub[:, :nc][self._eq_rows] = -np.inf, np.inf
@@ -313,6 +318,30 @@ class IlqrSolver(Solver):
         lb[nodes, -m.nu:], ub[nodes, -m.nu:] = -np.inf, np.inf
         self._box = (box_lb, box_ub)
         np.clip(self.U, box_lb, box_ub, out=self.U)
+
+    def _demote_dependent(self, proj) -> bool:
+        """The projected rows of nodes where they are dependent in the input (e.g. a final
+        position and velocity under two inputs that act alike: the projection keeps one
+        direction, meets the other row only if it already is, and leaves out its multiplier,
+        so a solve stalled unmet, or at a solution rejected every step) go back to the
+        augmented Lagrangian, from then on (later converging calls too): the problem is read
+        again without them in the layout. Converging solves only (real-time calls keep the
+        layout of the bounds: the rows of a receding horizon move between calls). Returns
+        whether rows were demoted (the caller evaluates and quadratises again)."""
+        if proj is None or self.opts["rti"]:
+            return False
+        new = proj.dependent() & ~self._demoted
+        if not new.any():
+            return False
+        self._demoted |= new
+        X, U = self.X, self.U
+        self._gather()
+        self.X, self.U = X, U
+        if self._box is not None:
+            np.clip(self.U, self._box[0], self._box[1], out=self.U)
+        log.debug("ilqr: projected rows at nodes %s go to the augmented Lagrangian (their "
+                  "input Jacobians are dependent, the rows not met)", np.flatnonzero(new))
+        return True
 
     def _switch_to_box(self, ev: dict[str, Any]) -> dict[str, Any] | None:
         """``input_bounds='auto'``: go on from the current iterate with the input bounds kept
@@ -546,6 +575,12 @@ class IlqrSolver(Solver):
         m = self.model
         info = self._new_info()
         lq = self._lq_step(ev, info)
+        if lq is not None and self._demote_dependent(lq[1]):
+            ev = self._evaluate(self.X, self.U)
+            if ev is None:  # the same point: the augmented Lagrangian's terms are finite
+                raise RuntimeError("ilqr: evaluation not finite after demoting rows")
+            info = self._new_info()
+            lq = self._lq_step(ev, info)
         if lq is None:
             return ev, info
         q, proj, bw = lq
