@@ -29,7 +29,7 @@ README = DOC.parents[1] / "README.md"
 
 @pytest.mark.parametrize("solver_call", [
     'make_solver("ilqr", prb)', 'make_solver("ipopt", prb)',
-    'make_solver("gnsqp", prb, {"max_iter": 200})'])
+    'make_solver("gnsqp", prb)'])
 def test_the_readme_example_solves_with_each_solver_its_comment_names(solver_call):
     text = README.read_text()
     section = text[text.index("## The library in a few lines"):]

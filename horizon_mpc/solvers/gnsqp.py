@@ -34,7 +34,7 @@ can turn inconsistent; IPOPT is the robust choice for cold, highly nonlinear pro
 Options (``make_solver('gnsqp', prb, opts)``):
 
 =================== ========== ========================================================
-``max_iter``        100        SQP iteration limit
+``max_iter``        300        SQP iteration limit
 ``tol``             1e-6       scaled stationarity tolerance
 ``tol_constr``      1e-8       constraint-violation tolerance
 ``tol_step``        1e-10      step tolerance (inf-norm)
@@ -94,7 +94,7 @@ class GnSqpSolver(NlpSolver):
 
     name = "gnsqp"
     DEFAULTS: dict[str, Any] = {
-        "max_iter": 100, "tol": 1e-6, "tol_constr": 1e-8, "tol_step": 1e-10,
+        "max_iter": 300, "tol": 1e-6, "tol_constr": 1e-8, "tol_step": 1e-10,
         "qp_solver": "qrqp", "qp_options": {}, "regularization": 1e-8, "armijo": 1e-4,
         "min_step": 1e-8, "sym": "SX", "constraint_rows": "valid", "nonmonotone": 3,
         "elastic_penalty": 1e4,
