@@ -281,3 +281,47 @@ def test_auto_input_bounds_stay_with_the_lagrangian_in_real_time_and_with_the_ba
     for solver in slow:
         solver.solve()
         assert "box_from" not in solver.stats.extra
+
+
+def _waypoint_with_bounded_inputs():
+    """A planar double integrator tracking (1, -0.5) through the waypoint (0.5, 0.5) at node
+    10 of 30, |u| <= 2: the waypoint's rows, moved onto node 9's inputs, ask 100x the bound
+    of them in one step."""
+    prb = Problem(30)
+    p = prb.create_state_variable("p", 2)
+    v = prb.create_state_variable("v", 2)
+    u = prb.create_input_variable("u", 2)
+    prb.set_dynamics(cs.vertcat(v, u))
+    prb.set_dt(0.1)
+    p.set_bounds([0, 0], [0, 0], nodes=0)
+    v.set_bounds([0, 0], [0, 0], nodes=0)
+    u.set_bounds([-2, -2], [2, 2])
+    prb.create_cost("track", p - [1.0, -0.5], weight=10.0)
+    prb.create_cost("effort", u, weight=0.01)
+    prb.create_constraint("waypoint", p - [0.5, 0.5], nodes=[10])
+    return prb
+
+
+@pytest.mark.parametrize("input_bounds", ["auto", "box"])
+def test_rows_are_not_projected_onto_bounded_inputs_in_a_converging_solve(input_bounds):
+    """The projection pinned node 9's inputs to what meets the waypoint in one step and the
+    bound pulled them back: max_iter in every mode, 21 % above IPOPT (a QA finding; GN-SQP
+    solves this linear-quadratic problem in one iteration). Now those rows are in the
+    augmented Lagrangian: 128 ('auto') and 48 ('box') iterations, IPOPT's optimum."""
+    ipopt = make_solver("ipopt", _waypoint_with_bounded_inputs())
+    assert ipopt.solve()
+    ilqr = make_solver("ilqr", _waypoint_with_bounded_inputs(), {"input_bounds": input_bounds})
+    assert ilqr.solve(), ilqr.stats.status
+    assert ilqr.stats.cost == pytest.approx(ipopt.stats.cost, rel=1e-6)
+    assert np.abs(ilqr.solution["u"]).max() <= 2.0 + 1e-9
+
+
+def test_auto_goes_on_with_the_box_in_the_next_converging_calls():
+    """A re-solve from the optimum of an 'auto' solve that switched took the 20
+    augmented-Lagrangian iterations again (23 in all, the cost rising on the way)."""
+    solver = make_solver("ilqr", _swing_up(5.0))
+    assert solver.solve() and solver.stats.extra["box_from"] == 20
+    cost = solver.stats.cost
+    assert solver.solve() and solver.stats.extra["box_from"] == 0
+    assert solver.stats.iterations <= 2
+    assert solver.stats.cost == pytest.approx(cost, rel=1e-8)

@@ -319,6 +319,33 @@ def test_options_of_the_wrong_type_are_refused_by_name(prb, name, opts, match):
         make_solver(name, prb, opts)
 
 
+@pytest.mark.parametrize("name, opts, match", [
+    ("ilqr", {"rho_init": 0.0}, "'rho_init' of solver 'ilqr' must be >0"),
+    ("ilqr", {"tol": -1.0}, "'tol' .* must be >=0"),  # 0: never stationary
+    ("ilqr", {"box_after": -3}, "'box_after' .* must be >=1"),
+    ("ilqr", {"iterations_per_call": 0}, "'iterations_per_call' .* must be >=1"),
+    ("ilqr", {"barrier_mu": float("nan")}, "'barrier_mu' .* must be >0"),
+    ("ilqr", {"time_budget": -0.01}, "'time_budget' .* must be >0"),
+    ("gnsqp", {"regularization": -1.0}, "'regularization' .* must be >=0"),  # QP failed
+    ("gnsqp", {"armijo": 1.0}, "'armijo' .* must be \\(0,1\\)"),
+])
+def test_options_out_of_their_range_are_refused_by_name(prb, name, opts, match):
+    """rho_init 0 ended a solve in 'linearisation not finite', regularization -1 in a QP
+    failure after 2.4 s; tol -1 and box_after -3 were taken silently."""
+    with pytest.raises(ValueError, match=match):
+        make_solver(name, prb, opts)
+    solver = make_solver(name, prb)
+    with pytest.raises(ValueError, match=match):  # set_option checks the same
+        solver.set_option(*next(iter(opts.items())))
+
+
+def test_a_none_default_option_takes_a_number_or_none(prb):
+    solver = make_solver("ilqr", prb, {"time_budget": 0.01})
+    solver.set_option("time_budget", None)
+    with pytest.raises(TypeError, match="'time_budget' .* must be a number"):
+        solver.set_option("time_budget", "1 ms")
+
+
 def test_options_of_the_right_kind_pass(prb):
     solver = make_solver("ilqr", prb, {"max_iter": np.int64(5), "tol": 1, "verbose": False})
     assert solver.opts["max_iter"] == 5

@@ -64,6 +64,9 @@ class Solver:
     name = "solver"
     DEFAULTS: dict[str, Any] = {}
     COMMON = {"warm_start": True, "verbose": False}
+    #: option -> the values it takes: '>0', '>=0', '>=1' (a number; None passes where the
+    #: default is None) or '(0,1)'; checked with the type, ValueError naming the option
+    RANGES: dict[str, str] = {}
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         self.prb = prb
@@ -104,7 +107,22 @@ class Solver:
         for key, value in opts.items():
             if key in known:
                 self._check_option_type(key, value, known[key])
+                self._check_option_range(key, value)
         return {**known, **opts}
+
+    def _check_option_range(self, key: str, value: Any) -> None:
+        """ValueError unless a number option is within its :attr:`RANGES` (NaN never is)."""
+        rule = self.RANGES.get(key)
+        if rule is None or value is None:
+            return
+        if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"option {key!r} of solver {self.name!r} must be a number, got "
+                            f"{value!r} ({type(value).__name__})")
+        x = float(value)
+        ok = {">0": x > 0, ">=0": x >= 0, ">=1": x >= 1, "(0,1)": 0 < x < 1}[rule]
+        if not ok:
+            raise ValueError(f"option {key!r} of solver {self.name!r} must be {rule}, got "
+                             f"{value!r}")
 
     def _check_option_type(self, key: str, value: Any, default: Any) -> None:
         """TypeError unless ``value`` is of the default's kind (bool, int, real number,

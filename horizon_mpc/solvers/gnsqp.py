@@ -99,6 +99,9 @@ class GnSqpSolver(NlpSolver):
         "min_step": 1e-8, "sym": "SX", "constraint_rows": "valid", "nonmonotone": 3,
         "elastic_penalty": 1e4,
     }
+    RANGES = {"max_iter": ">=1", "tol": ">=0", "tol_constr": ">=0", "tol_step": ">=0",
+              "regularization": ">=0", "armijo": "(0,1)", "min_step": ">0",
+              "nonmonotone": ">=1", "elastic_penalty": ">0"}
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         general = [n for n, c in prb.costs.items() if c.kind == "general cost"]

@@ -131,6 +131,14 @@ class IlqrSolver(Solver):
         "barrier_delta": 1.0,
     }
 
+    RANGES = {
+        "max_iter": ">=1", "iterations_per_call": ">=1", "tol": ">=0", "tol_constraint": ">=0",
+        "tol_complementarity": ">=0", "mu_init": ">=0", "mu_min": ">=0", "mu_max": ">0",
+        "rho_init": ">0", "rho_factor": ">=1", "rho_max": ">0", "line_search_steps": ">=1",
+        "time_budget": ">0", "al_inner_tol": ">=0", "al_max_inner": ">=1", "box_after": ">=1",
+        "barrier_mu": ">0", "barrier_delta": ">0",
+    }
+
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
         if self.opts["equality"] not in ("projection", "lagrangian"):
@@ -140,6 +148,8 @@ class IlqrSolver(Solver):
             raise ValueError(f"ilqr option 'input_bounds' must be 'auto', 'box' or "
                              f"'lagrangian', got {self.opts['input_bounds']!r}")
         self._auto_box = False  # 'auto': this call went on with the box (_switch_to_box)
+        self._box_kept = False  # 'auto': a converging call did: the next ones start with it
+        self._shifted = False  # shift() since the last call (see _begin_call)
         # nodes whose projected rows went back to the augmented Lagrangian (_demote_dependent;
         # for the solver's life: a warm re-solve keeps their multipliers)
         self._demoted = np.zeros(prb.n_nodes, bool)
@@ -276,8 +286,14 @@ class IlqrSolver(Solver):
             self._layout = EqualityLayout.from_bounds(
                 lb[:, :nc], ub[:, :nc], self._uses_input, lbN[0, :ncN], ubN[0, :ncN], m.nu,
                 m.con_reach, m.conN_reach)
-            if self._demoted.any() and not self.opts["rti"]:  # see _demote_dependent
-                self._layout = self._layout.without_nodes(self._demoted)
+            if not self.opts["rti"]:
+                # a converging solve projects no row onto an input with a bound: the
+                # projection pins the input to what meets the rows in one step (a waypoint
+                # of a double integrator: 100x its bound), the bound pulls it back, and
+                # the solve stalled (max_iter in every mode, 21 % above IPOPT); rows found
+                # dependent there go back too (_demote_dependent)
+                bounded = (np.isfinite(ulb) | np.isfinite(uub)).any(axis=0)
+                self._layout = self._layout.without_nodes(bounded | self._demoted)
             self._eq_rows = self._layout.stage_rows()
             # projected rows leave the augmented Lagrangian
             lb[:, :nc][self._eq_rows], ub[:, :nc][self._eq_rows] = -np.inf, np.inf
@@ -342,6 +358,11 @@ class IlqrSolver(Solver):
         log.debug("ilqr: projected rows at nodes %s go to the augmented Lagrangian (their "
                   "input Jacobians are dependent, the rows not met)", np.flatnonzero(new))
         return True
+
+    def _auto_applies(self) -> bool:
+        """Whether ``input_bounds='auto'`` may hand the input bounds to the box (not with the
+        barrier, which relaxes them on purpose)."""
+        return self.opts["input_bounds"] == "auto" and self.opts["inequality"] == "lagrangian"
 
     def _switch_to_box(self, ev: dict[str, Any]) -> dict[str, Any] | None:
         """``input_bounds='auto'``: go on from the current iterate with the input bounds kept
@@ -661,8 +682,20 @@ class IlqrSolver(Solver):
         self.timings = {}
         self._nu = 0.0
         self._prepared = None
-        self._auto_box = False
-        self._box_from = None
+        # 'auto': a converging call after one that went on with the box starts with it (a
+        # re-solve from that call's optimum took the 20 augmented-Lagrangian iterations again,
+        # moving away and back: 23 iterations against 1)
+        self._auto_box = self._box_kept and not self.opts["rti"] and self._auto_applies()
+        self._box_from = 0 if self._auto_box else None
+        if self._shifted and not self.opts["rti"]:
+            # a converging solve of a shifted (receding) problem starts from the initial
+            # penalties: those its predecessor raised made a unicycle-around-an-obstacle MPC
+            # end 4 of 12 ticks at max_iter (a fresh solver from the same guess: 14-19
+            # iterations); now 0 of 12, 15-136. A plain re-solve keeps them (after a bound
+            # change, a cart-pole with them reset ended at 1.1e-6 violation, max_iter)
+            self._al.reset_penalties()
+            self._alN.reset_penalties()
+        self._shifted = False
         self._gather()
         return self._evaluate(self.X, self.U)
 
@@ -764,10 +797,11 @@ class IlqrSolver(Solver):
             if info.get("linearisation_failed"):
                 status = "linearisation not finite (NaN/Inf) at every regularisation"
                 break
-            if (not rti and it == o["box_after"] and o["input_bounds"] == "auto"
-                    and o["inequality"] == "lagrangian" and it < n_iter):
+            if (not rti and not self._auto_box and it == o["box_after"]
+                    and self._auto_applies() and it < n_iter):
                 ev = self._switch_to_box(ev)
                 self._box_from = it if self._auto_box else None
+                self._box_kept = self._auto_box
                 if ev is None:
                     status = "not finite after the switch to the box"
                     break
@@ -903,6 +937,7 @@ class IlqrSolver(Solver):
         super().shift()
         self._al.shift()
         self._prepared = None
+        self._shifted = True
 
     def reset_multipliers(self) -> None:
         """Forget the augmented-Lagrangian state (e.g. after a solver failure)."""
