@@ -24,6 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -223,6 +224,11 @@ class _Loop:
 _LOOP_PUBLISHERS = {"joint_trajectory": 1, "joint_states": 1, "odom": 1, "cmd_vel": 1}
 
 
+class MpcSettingError(ValueError):
+    """A setting (``-p``) the MPC node refused while it was built (lockstep: in this
+    process)."""
+
+
 def _foreign_publishers(node: Node, rec: Recording) -> None:
     """Add to ``rec.foreign_publishers`` (and log once) the loop's topics that have more
     publishers than the loop's own: another node on the run's domain."""
@@ -236,14 +242,13 @@ def _foreign_publishers(node: Node, rec: Recording) -> None:
                         note)
 
 
-def _final_isolation_check(executor: SingleThreadedExecutor, node: Node, rec: Recording,
-                           since: float) -> None:
+def _final_isolation_check(node: Node, rec: Recording, since: float) -> None:
     """The isolation check once more at the end of a run, at least ``DISCOVERY_SETTLE`` s
     of wall time after ``node`` was created (``since``, ``time.perf_counter()``): discovery
     takes a while, and a short lockstep run (1.5 sim s in 0.3 s of wall time) ended before
-    it found a publisher that was there all along."""
-    while time.perf_counter() < since + DISCOVERY_SETTLE:
-        executor.spin_once(timeout_sec=0.05)
+    it found a publisher that was there all along. It waits without spinning: the graph is
+    the middleware's, and the loop's nodes stay where the run ended."""
+    time.sleep(max(0.0, since + DISCOVERY_SETTLE - time.perf_counter()))
     _foreign_publishers(node, rec)
 
 
@@ -260,11 +265,15 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
     rec.domain_id = domain_id
     try:
         t_build = time.perf_counter()
-        mpc = MpcNode(context=ctx, parameter_overrides=[
-            Parameter("robot", value=robot), Parameter("use_sim_time", value=True),
-            Parameter("trigger", value="state"),
-            *([] if iterations is None else [Parameter("iterations", value=int(iterations))]),
-            *(Parameter(k, value=v) for k, v in (mpc_parameters or {}).items())])
+        try:
+            mpc = MpcNode(context=ctx, parameter_overrides=[
+                Parameter("robot", value=robot), Parameter("use_sim_time", value=True),
+                Parameter("trigger", value="state"),
+                *([] if iterations is None else [Parameter("iterations",
+                                                            value=int(iterations))]),
+                *(Parameter(k, value=v) for k, v in (mpc_parameters or {}).items())])
+        except ValueError as exc:  # a -p value mpc_node refuses (an unknown gait, ...)
+            raise MpcSettingError(str(exc)) from exc
         rec.build_time = time.perf_counter() - t_build
         dt = mpc.mpc.settings.dt
         sim = SimNode(context=ctx, parameter_overrides=[
@@ -317,9 +326,9 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
         while time.perf_counter() < deadline and not record_ticks():
             executor.spin_once(timeout_sec=0.05)
         rec.wall_time = time.perf_counter() - wall0
-        _final_isolation_check(executor, player, rec, t_player)
         rec.deadline_misses = mpc.deadline_misses
         rec.stale_skips = mpc.stale_skips
+        _final_isolation_check(player, rec, t_player)
         executor.shutdown()
         for node in (player, mpc, sim):
             node.destroy_node()
@@ -368,7 +377,7 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
             cpu0 = (time.process_time(), process_cpu_seconds(child.pid))
             rec.wall_time = _realtime_loop(executor, sim, monitor, child, pub_cmd, dt, loop,
                                            lambda: _foreign_publishers(player, rec))
-            _final_isolation_check(executor, player, rec, t_player)
+            _final_isolation_check(player, rec, t_player)
             rec.mpc_process = {
                 "pid": child.pid, "domain_id": child.domain_id,
                 "memory_mb": process_memory_mb(child.pid),
@@ -503,7 +512,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MpcProcessError as exc:
         log.error("%s", exc)
         return 1
-    except ParameterException as exc:  # a -p value of the wrong type or out of its range
+    except (ParameterException, MpcSettingError) as exc:  # a -p value mpc_node refuses
         log.error("cannot run: %s", exc)
         return 2
     summary = summarise(rec, segments, mode=args.mode, robot=args.robot)
@@ -537,6 +546,13 @@ def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, li
         ValueError / FileNotFoundError / KeyError: what cannot run, in one message.
     """
     load_robot_config(args.robot)  # an unknown robot, named with the known ones
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():  # found after the run, the run was lost
+        raise ValueError(f"--out {out} exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out {out}: cannot make that folder ({exc.strerror})") from None
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be a finite number of seconds > 0, got "
                          f"{args.duration}")

@@ -9,9 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from horizon_mpc.config import find_config_file
+from horizon_mpc.config import find_config_file, read_yaml
 from horizon_mpc.nodes.mpc_inputs import ABSURD_COMMAND
 from horizon_mpc.sim.simulator import PLAUSIBLE_WRENCH
 
@@ -61,11 +60,7 @@ MAX_PUSH = PLAUSIBLE_WRENCH
 
 def _read(path: str | Path) -> tuple[Path, object]:
     path = profile_file(path)
-    with open(path, encoding="utf-8") as fh:
-        try:
-            data = yaml.safe_load(fh)
-        except yaml.YAMLError as exc:
-            raise ValueError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
+    data = read_yaml(path)
     if isinstance(data, dict):
         unknown = set(data) - {"segments", "pushes"}
         if unknown:

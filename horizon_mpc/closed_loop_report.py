@@ -91,6 +91,7 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
     t, q, v = d["t"], d["q"], d["v"]
     actual = np.column_stack([v[:, 0], v[:, 1], v[:, 5]])
     segs, start = [], 0.0
+    run_end = float(t[-1]) if len(t) else 0.0
     for i, seg in enumerate(segments):
         end = start + seg.duration
         mask = (t >= start + SETTLING - 1e-9) & (t < end - 1e-9)
@@ -98,6 +99,8 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
         entry = {"index": i, "start": start, "end": end, "command": dict(zip(AXES, cmd.tolist(),
                                                                              strict=True)),
                  "samples": int(mask.sum())}
+        if end > run_end + 0.05:  # --duration ended the run before this segment's end
+            entry.update(end=max(start, run_end), planned_end=end, cut_short=True)
         if rec.max_velocity is not None:
             lim = np.abs(np.asarray(rec.max_velocity, float))
             clamped = np.clip(cmd, -lim, lim)

@@ -29,7 +29,8 @@ from typing import Any
 
 import yaml
 
-__all__ = ["RobotConfig", "SimGains", "config_dirs", "find_config_file", "load_robot_config"]
+__all__ = ["RobotConfig", "SimGains", "config_dirs", "find_config_file", "load_robot_config",
+           "read_yaml"]
 
 
 @dataclass
@@ -83,15 +84,20 @@ def config_dirs() -> list[Path]:
 
 def find_config_file(name_or_path: str | Path, what: str = "robot config",
                      subdir: str = "") -> Path:
-    """The YAML file of a config: ``name_or_path`` itself when it ends in ``.yaml``/``.yml``,
-    else ``<dir>/<subdir>/<name>.yaml`` in the first of :func:`config_dirs` that has it.
+    """The YAML file of a config: ``name_or_path`` itself when it is a path (ends in
+    ``.yaml``/``.yml``, names a folder, or is a :class:`~pathlib.Path`), else
+    ``<dir>/<subdir>/<name>.yaml`` in the first of :func:`config_dirs` that has it.
 
     Raises:
-        FileNotFoundError: no such file (the message names ``what`` and lists the available
-            names).
+        FileNotFoundError: no such file, or a folder (the message names ``what`` and lists the
+            available names).
     """
     p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml"):
+    # a path: a .yaml/.yml name, a name with a folder, or a Path (a bare name is a config's,
+    # whatever the working directory holds)
+    if p.suffix in (".yaml", ".yml") or len(p.parts) > 1 or isinstance(name_or_path, Path):
+        if p.is_dir():
+            raise FileNotFoundError(f"{what} {str(p)!r} is a folder, not a YAML file")
         if not p.is_file():
             raise FileNotFoundError(f"{what} file {str(p)!r} does not exist")
         return p
@@ -103,6 +109,19 @@ def find_config_file(name_or_path: str | Path, what: str = "robot config",
     available = sorted({c.stem for d in dirs if d.is_dir() for c in d.glob("*.yaml")})
     raise FileNotFoundError(f"no {what} {str(name_or_path)!r}; available: "
                             f"{', '.join(available) or 'none'}")
+
+
+def read_yaml(path: str | Path) -> Any:
+    """The data of the YAML file at ``path``; ``ValueError`` naming the file when it is not
+    text (UTF-8) or not valid YAML."""
+    with open(path, encoding="utf-8") as fh:
+        try:
+            return yaml.safe_load(fh)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{path}: not a text file (UTF-8): {exc.reason} at byte "
+                             f"{exc.start}") from None
 
 
 _KNOWN = {"robot", "urdf_path", "base_link", "feet", "nominal_posture", "nominal_joints",
@@ -127,8 +146,7 @@ def load_robot_config(name_or_path: str | Path) -> RobotConfig:
         ValueError: the file is not a mapping or lacks ``feet``/a robot source.
     """
     path = find_config_file(name_or_path)
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
+    data = read_yaml(path)
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a YAML mapping at the top level")
     if not data.get("robot") and not data.get("urdf_path"):

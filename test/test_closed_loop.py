@@ -109,7 +109,10 @@ def test_yaml_numbers_without_a_dot_are_numbers(tmp_path):
     (["-p", "nosuch=1"], "mpc_node has no such parameter"),           # silently ignored
     (["-p", "robot=solo12"], "set by the closed loop"),                # hung
     (["-p", "max_vx=abc"], "expecting type 'DOUBLE'"),               # a raw traceback
-], ids=["duration", "robot", "unknown_param", "harness_param", "param_type"])
+    (["-p", "gait=gallop"], "unknown gait 'gallop'"),                 # traceback, exit 1
+    (["-p", "w_posture=-1"], "w_posture"),                            # traceback, exit 1
+], ids=["duration", "robot", "unknown_param", "harness_param", "param_type", "gait",
+        "weight"])
 def test_the_cli_refuses_what_cannot_run_in_one_line_with_code_2(tmp_path, caplog, args, match):
     from horizon_mpc.closed_loop import main
 
@@ -119,6 +122,48 @@ def test_the_cli_refuses_what_cannot_run_in_one_line_with_code_2(tmp_path, caplo
         assert main(["--profile", str(profile), "--out", str(tmp_path / "out"), "--no-gif",
                      *args]) == 2
     assert any(match in r.getMessage() for r in caplog.records), caplog.text
+
+
+def test_an_out_that_is_not_a_folder_is_refused_before_the_run(tmp_path, caplog):
+    """It was found when the report was written, after the run: a traceback, the run lost."""
+    from horizon_mpc.closed_loop import main
+
+    out = tmp_path / "afile"
+    out.write_text("")
+    with caplog.at_level("ERROR"):
+        assert main(["--out", str(out), "--no-gif", "--duration", "0.5"]) == 2
+    assert "exists and is not a folder" in caplog.text
+
+
+def test_a_profile_is_any_file_given_by_path_and_its_problems_name_it(tmp_path):
+    text = tmp_path / "walk.txt"  # was 'no command profile ...; available: default'
+    text.write_text("- {duration: 1.0, vx: 0.2}\n")
+    assert load_profile(text) == [Segment(1.0, vx=0.2)]
+    folder = tmp_path / "dir.yaml"  # was 'does not exist'
+    folder.mkdir()
+    with pytest.raises(FileNotFoundError, match="is a folder"):
+        load_profile(folder)
+    binary = tmp_path / "b.yaml"  # was a bare 'utf-8' codec error
+    binary.write_bytes(b"\xff\xfe\x00segments")
+    with pytest.raises(ValueError, match=r"b\.yaml: not a text file"):
+        load_profile(binary)
+
+
+def test_a_segment_the_duration_cut_short_says_so():
+    rec = Recording()
+    q0 = np.r_[0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0, np.zeros(12)]
+    for ti in np.arange(0.0, 2.0, 0.02):
+        rec.t.append(float(ti))
+        rec.q.append(q0)
+        rec.v.append(np.zeros(18))
+        rec.cmd.append(np.zeros(3))
+        rec.cmd_mpc.append(np.zeros(3))
+        rec.contact.append(np.ones(4, bool))
+    segs = summarise(rec, [Segment(1.5), Segment(3.5, vx=0.2), Segment(1.0)])["segments"]
+    assert "cut_short" not in segs[0] and segs[0]["end"] == 1.5
+    assert segs[1]["cut_short"] and segs[1]["planned_end"] == 5.0
+    assert segs[1]["end"] == pytest.approx(1.98)
+    assert segs[2]["cut_short"] and segs[2]["samples"] == 0 and "mean" not in segs[2]
 
 
 def test_the_mpc_parameter_names_are_the_nodes(walking_mpc_node_parameters):

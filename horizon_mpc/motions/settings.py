@@ -20,9 +20,7 @@ import math
 from pathlib import Path
 from typing import Any, TypeVar
 
-import yaml
-
-from horizon_mpc.config import find_config_file
+from horizon_mpc.config import find_config_file, read_yaml
 
 __all__ = ["MotionConfig", "check_settings", "load_motion_config"]
 
@@ -103,8 +101,7 @@ def load_motion_config(motion: str | Path) -> MotionConfig:
         ValueError: not a mapping, or unknown top-level keys.
     """
     path = find_config_file(motion, "motion config", subdir="motions")
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh) or {}
+    data = read_yaml(path) or {}
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a YAML mapping at the top level")
     known = {"robot", "solver", "settings", "robots"}
