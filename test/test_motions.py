@@ -159,6 +159,8 @@ def test_cli_rejects_bad_settings_before_solving_in_one_line(capsys):
         assert main([motion, "--set", setting, "--no-animation"]) == 2
         err = capsys.readouterr().err
         assert err.startswith("motion: error:") and text in err and "Traceback" not in err
+        if setting.startswith("distnace"):  # named as the --set it came from, not the file's
+            assert "motion: error: --set: unknown setting(s) ['distnace']" in err
 
 
 @pytest.mark.parametrize("motion, setting, text", [
@@ -171,6 +173,9 @@ def test_cli_rejects_bad_settings_before_solving_in_one_line(capsys):
     ("walk", "mpc=5", "'mpc' must be a mapping"),
     ("walk", "average_cycles=0", "'average_cycles' must be > 0"),   # NaN velocities
     ("walk", "w_touchdown=-1", "'w_touchdown' must be >= 0"),
+    ("walk", "mpc={gait: {step_height: -0.1}}", "'mpc.gait.step_height' must be"),  # feet
+    ("walk", "mpc={friction: -1}", "'mpc.friction' must be"),  # 4.8 cm underground, 'solved'
+    ("walk", "mpc={gait: trot}", "'mpc.gait' must be a mapping"),  # a dict() error
     ("walk", "foo", "--set expects KEY=VALUE"),                     # exit code 1 before
     ("turn", "locked_joints=[foo]", "foo"),                         # a traceback before
 ], ids=lambda x: x if isinstance(x, str) and "=" in x else None)
@@ -188,6 +193,9 @@ def test_cli_refuses_an_out_path_that_is_a_file_before_solving(tmp_path, capsys)
     (tmp_path / "taken").write_text("")
     assert main(["leap", "--out", str(tmp_path / "taken"), "--no-animation"]) == 2
     assert "exists and is not a folder" in capsys.readouterr().err
+    # a folder under a file: a traceback after the solve, exit 1, before
+    assert main(["walk", "--out", str(tmp_path / "taken" / "sub"), "--no-animation"]) == 2
+    assert "cannot make that folder" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -6,6 +6,7 @@ they need. Weights multiply squared residuals (SI units: m, rad, m/s, rad/s, N).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -20,6 +21,12 @@ class GaitSettings:
     step_duration: float = 0.3
     duty_factor: float = 0.5
     step_height: float = 0.07
+
+    def __post_init__(self) -> None:
+        _require(self, "mpc.gait", step_duration=">0", step_height=">=0")
+        if not (isinstance(self.duty_factor, (int, float)) and 0 < self.duty_factor <= 1):
+            raise ValueError(f"'mpc.gait.duty_factor' must be in (0, 1], got "
+                             f"{self.duty_factor!r}")
 
 
 @dataclass
@@ -95,6 +102,25 @@ class MpcSettings:
     # velocity; further away, the tick runs whole
     max_extrapolation: float = 0.005
 
+    def __post_init__(self) -> None:
+        _require(self, "mpc", dt=">0", barrier_mu=">0", barrier_delta=">0",
+                 rho_init=">0", pose_leash=">=0", yaw_leash=">=0", pose_jump=">0",
+                 max_extrapolation=">=0")
+        if self.friction is not None:
+            _require(self, "mpc", friction=">0")
+        if self.base_height is not None:
+            _require(self, "mpc", base_height=">0")
+        for name in ("n_nodes", "iterations"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise ValueError(f"'mpc.{name}' must be an integer >= 1, got {value!r}")
+        for name in ("max_velocity", "max_acceleration"):
+            value = getattr(self, name)
+            if not (isinstance(value, (list, tuple)) and len(value) == 3 and all(
+                    _number(x) and x >= 0 for x in value)):
+                raise ValueError(f"'mpc.{name}' must be 3 numbers >= 0 (vx, vy, wz), got "
+                                 f"{value!r}")
+
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> MpcSettings:
         """Settings from a YAML mapping; unknown keys raise ``ValueError`` naming them."""
@@ -112,7 +138,23 @@ def _check(data: dict, cls: type, where: str) -> None:
         raise ValueError(f"unknown key(s) {sorted(unknown)} in '{where}'; known: {sorted(names)}")
 
 
-def _checked(data: dict | None, cls: type, where: str) -> dict:
+def _number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _require(obj: Any, where: str, **rules: str) -> None:
+    """ValueError unless each named field is a finite number obeying its rule ('>0' or
+    '>=0'), naming the field."""
+    for name, rule in rules.items():
+        x = getattr(obj, name)
+        if not (_number(x) and (x > 0 if rule == ">0" else x >= 0)):
+            raise ValueError(f"'{where}.{name}' must be a finite number {rule}, got {x!r}")
+
+
+def _checked(data: Any, cls: type, where: str) -> dict:
+    if data is not None and not isinstance(data, dict):
+        raise ValueError(f"'{where}' must be a mapping of {sorted(f.name for f in fields(cls))}"
+                         f", got {data!r}")
     data = dict(data or {})
     _check(data, cls, where)
     return data

@@ -87,6 +87,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         out = Path(args.out or f"out/motions/{args.motion}")
         if out.exists() and not out.is_dir():  # found before the solve, not after it
             raise ValueError(f"--out {out} exists and is not a folder")
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:  # under a file, no permission: a traceback after the solve
+            raise ValueError(f"--out {out}: cannot make that folder ({exc.strerror})") from None
     except (ValueError, KeyError, FileNotFoundError, yaml.YAMLError) as exc:
         print(f"motion: error: {exc}", file=sys.stderr)
         return 2

@@ -53,8 +53,10 @@ class MotionConfig:
         fields = {f.name: f for f in dataclasses.fields(cls)}
         unknown = sorted(set(values) - set(fields))
         if unknown:
-            raise ValueError(f"{self.source or self.motion}: unknown setting(s) {unknown} for "
-                             f"motion {self.motion!r}; known: {sorted(fields)}")
+            given = sorted(set(unknown) & set(overrides or {}))  # --set, not the file's
+            where = "--set" if given else (self.source or self.motion)
+            raise ValueError(f"{where}: unknown setting(s) {given or unknown} for motion "
+                             f"{self.motion!r}; known: {sorted(fields)}")
         return cls(**{k: _checked_value(k, v, _default(fields[k])) for k, v in values.items()})
 
 
