@@ -149,16 +149,22 @@ def test_a_profile_is_any_file_given_by_path_and_its_problems_name_it(tmp_path):
         load_profile(binary)
 
 
-def test_a_segment_the_duration_cut_short_says_so():
-    rec = Recording()
+def _steady_recording(seconds: float, v: np.ndarray, **fields) -> Recording:
+    """A go2-sized recording, standing pose, base velocity ``v`` (18,), every 0.02 s."""
+    rec = Recording(**fields)
     q0 = np.r_[0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0, np.zeros(12)]
-    for ti in np.arange(0.0, 2.0, 0.02):
+    for ti in np.arange(0.0, seconds, 0.02):
         rec.t.append(float(ti))
         rec.q.append(q0)
-        rec.v.append(np.zeros(18))
+        rec.v.append(v)
         rec.cmd.append(np.zeros(3))
         rec.cmd_mpc.append(np.zeros(3))
         rec.contact.append(np.ones(4, bool))
+    return rec
+
+
+def test_a_segment_the_duration_cut_short_says_so():
+    rec = _steady_recording(2.0, np.zeros(18))
     segs = summarise(rec, [Segment(1.5), Segment(3.5, vx=0.2), Segment(1.0)])["segments"]
     assert "cut_short" not in segs[0] and segs[0]["end"] == 1.5
     assert segs[1]["cut_short"] and segs[1]["planned_end"] == 5.0
@@ -321,15 +327,8 @@ def test_a_segment_beyond_the_limits_is_scored_against_the_clamped_command():
     from horizon_mpc.closed_loop import command_limits
     from horizon_mpc.config import load_robot_config
 
-    rec = Recording(nominal_height=0.3, max_velocity=[0.6, 0.5, 0.8])
-    q0 = np.r_[0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0, np.zeros(12)]
-    for ti in np.arange(0.0, 3.0, 0.02):
-        rec.t.append(float(ti))
-        rec.q.append(q0)
-        rec.v.append(np.r_[0.6, 0.0, 0.0, 0.0, 0.0, -0.3, np.zeros(12)])
-        rec.cmd.append(np.zeros(3))
-        rec.cmd_mpc.append(np.zeros(3))
-        rec.contact.append(np.ones(4, bool))
+    rec = _steady_recording(3.0, np.r_[0.6, 0.0, 0.0, 0.0, 0.0, -0.3, np.zeros(12)],
+                            nominal_height=0.3, max_velocity=[0.6, 0.5, 0.8])
     s = summarise(rec, [Segment(3.0, vx=1.2, wz=-0.3)])
     seg = s["segments"][0]
     assert seg["command"] == {"vx": 1.2, "vy": 0.0, "wz": -0.3}  # what was asked
