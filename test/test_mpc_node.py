@@ -673,10 +673,12 @@ def test_startup_errors_end_in_one_line_and_exit_code_1_interrupts_in_0(monkeypa
 
 def test_an_integer_for_a_float_parameter_is_taken_at_startup(context, walking_mpc):
     """'-p control_rate:=50' (rcl types it an integer) is 50.0, not a type error."""
-    node = sim_time_node(context, walking_mpc, control_rate=25, state_timeout=1)
+    node = sim_time_node(context, walking_mpc, control_rate=25, state_timeout=1,
+                         w_base_linear_velocity=[40, 100, 10])  # an integer list: refused
     try:
         assert node.get_parameter("control_rate").value == 25.0
         assert node.period == pytest.approx(0.04) and node.state_timeout == 1.0
+        assert node.get_parameter("w_base_linear_velocity").value == [40.0, 100.0, 10.0]
     finally:
         node.destroy_node()
 

@@ -26,8 +26,9 @@ def declare(node: Node, name: str, default: object, description: str,
     """Declare ``name`` with its description, range and read-only flag.
 
     A float parameter given an integer at start-up (``-p control_rate:=50``, a YAML ``50``)
-    takes it as that float: rcl types ``50`` as an integer, and the declaration would
-    otherwise fail on the type. (Live ``ros2 param set`` keeps rclpy's strict typing.)
+    takes it as that float, and a float-list parameter an integer list (``[1, 2, 3]``): rcl
+    types them as integers, and the declaration would otherwise fail on the type. (Live
+    ``ros2 param set`` keeps rclpy's strict typing.)
     """
     desc = ParameterDescriptor(description=description, read_only=read_only)
     if rng:
@@ -39,4 +40,8 @@ def declare(node: Node, name: str, default: object, description: str,
     if (isinstance(default, float) and given is not None
             and given.type_ == Parameter.Type.INTEGER):
         overrides[name] = Parameter(name, value=float(given.value))
+    elif (isinstance(default, list) and default and isinstance(default[0], float)
+          and given is not None and given.type_ == Parameter.Type.INTEGER_ARRAY):
+        # a weight list written without dots (-p "w_base_linear_velocity:=[1,2,3]")
+        overrides[name] = Parameter(name, value=[float(x) for x in given.value])
     node.declare_parameter(name, default, desc)
