@@ -199,6 +199,16 @@ def test_cli_refuses_an_out_path_that_is_a_file_before_solving(tmp_path, capsys)
 
 
 @pytest.mark.slow
+def test_a_walk_duration_off_the_tick_grid_is_rounded_with_a_warning(go2, caplog):
+    cfg, model = go2
+    st = _settings("walk", WalkSettings, "go2", duration=0.05)
+    with caplog.at_level("WARNING"):
+        res = run_walk(cfg, "ilqr", st, model=model)
+    assert res.n_nodes == 2  # 0.05 s of 0.02 s ticks: rounded to 2 (silently before)
+    assert "not a whole number of 0.02 s ticks: walking 2 ticks" in caplog.text
+
+
+@pytest.mark.slow
 def test_cli_a_walk_shorter_than_two_ticks_is_an_error(capsys):
     from horizon_mpc.motions.cli import main
 

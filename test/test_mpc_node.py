@@ -1058,3 +1058,13 @@ def test_timing_settings_outside_where_the_robot_walked_are_warned_about():
     assert timing_warnings(0.02, 24, 0.2, 6, trigger="state") == []  # ticks on states
     assert any("dt 0.04 s" in w for w in timing_warnings(0.04, 24, 0.04, 6))
     assert any("n_nodes 12" in w for w in timing_warnings(0.02, 12, 0.02, 6))
+
+
+def test_more_published_points_than_nodes_are_clamped_with_a_warning(context, walking_mpc,
+                                                                     capfd):
+    node = sim_time_node(context, walking_mpc, publish_points=100)
+    try:
+        assert node.publish_points == walking_mpc.settings.n_nodes  # was silent
+        assert "publish_points 100 is more than the horizon's" in capfd.readouterr().err
+    finally:
+        node.destroy_node()

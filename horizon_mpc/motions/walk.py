@@ -132,6 +132,9 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
     if n_ticks < 2:  # one tick has no motion to measure (its figures were of the start)
         raise ValueError(f"walk duration {st.duration:g} s is shorter than two MPC ticks of "
                          f"{dt:g} s")
+    if abs(n_ticks * dt - st.duration) > 1e-9:
+        log.warning("walk duration %g s is not a whole number of %g s ticks: walking %d "
+                    "ticks (%g s)", st.duration, dt, n_ticks, n_ticks * dt)
     Q, V, A, F, TAU, S = [q], [v], [], [], [], []
     tick_time, iterations, violation = [], [], []
     # the pose reference integrates the command from the start pose (within the leash of

@@ -134,6 +134,10 @@ class MpcNode(MpcParameters, Node):
         self.state_timeout = self._p("state_timeout")
         self.cmd_timeout = self._p("cmd_timeout")
         self.publish_points = min(self._p("publish_points"), settings.n_nodes)
+        if self._p("publish_points") > settings.n_nodes:
+            self.get_logger().warning(
+                f"publish_points {self._p('publish_points')} is more than the horizon's "
+                f"{settings.n_nodes} nodes: publishing {settings.n_nodes}")
         mpc.prepare_inverse_dynamics(self.publish_points)  # compiled now, not in a tick
         self.trigger = self._p("trigger")
         budget = self._p("solve_budget")
