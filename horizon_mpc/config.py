@@ -22,6 +22,8 @@ Schema (every section but ``robot``/``feet`` is optional and falls back to the d
 from __future__ import annotations
 
 import copy
+import dataclasses
+import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,8 +31,8 @@ from typing import Any
 
 import yaml
 
-__all__ = ["RobotConfig", "SimGains", "config_dirs", "find_config_file", "load_robot_config",
-           "read_yaml"]
+__all__ = ["RobotConfig", "SimGains", "check_settings", "config_dirs", "field_default",
+           "find_config_file", "load_robot_config", "read_yaml"]
 
 
 @dataclass
@@ -122,6 +124,42 @@ def read_yaml(path: str | Path) -> Any:
         except UnicodeDecodeError as exc:
             raise ValueError(f"{path}: not a text file (UTF-8): {exc.reason} at byte "
                              f"{exc.start}") from None
+
+
+def field_default(f: dataclasses.Field) -> Any:
+    """The default value of a dataclass field (its factory's product), None without one."""
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return None
+
+
+def check_settings(settings: object, positive: tuple[str, ...] = (),
+                   non_negative: tuple[str, ...] = (), prefix: str = "") -> None:
+    """Check a settings dataclass: every number finite, those in ``positive`` > 0, those in
+    ``non_negative`` >= 0 (an optional number, None by default, is checked when given).
+    Lists, mappings, nested settings, text and flags are left to their owners.
+
+    Raises:
+        ValueError: naming the setting as ``prefix + name`` (the CLIs turn it into one
+            line, exit code 2).
+    """
+    for f in dataclasses.fields(settings):
+        value = getattr(settings, f.name)
+        default = field_default(f)
+        if (value is None or isinstance(value, (list, tuple, dict))
+                or dataclasses.is_dataclass(value) or isinstance(default, (str, bool))):
+            continue
+        name = prefix + f.name
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"setting {name!r} must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ValueError(f"setting {name!r} must be finite, got {value!r}")
+        if f.name in positive and not value > 0:
+            raise ValueError(f"setting {name!r} must be > 0, got {value!r}")
+        if f.name in non_negative and value < 0:
+            raise ValueError(f"setting {name!r} must be >= 0, got {value!r}")
 
 
 _KNOWN = {"robot", "urdf_path", "base_link", "feet", "nominal_posture", "nominal_joints",

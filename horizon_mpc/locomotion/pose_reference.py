@@ -15,13 +15,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from horizon_mpc.sim.rotations import quat_yaw
+
 __all__ = ["advance_pose", "base_yaw", "horizon_poses", "wrap_angle"]
 
 
 def base_yaw(q: np.ndarray) -> float:
     """Yaw (rad) of the base quaternion ``q[3:7]`` (x, y, z, w; any norm)."""
-    x, y, z, w = q[3:7].tolist()
-    return math.atan2(2 * (w * z + x * y), w * w + x * x - y * y - z * z)
+    return quat_yaw(q[3:7])
 
 
 def wrap_angle(a: float) -> float:

@@ -10,6 +10,8 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from horizon_mpc.config import check_settings
+
 __all__ = ["GaitSettings", "MpcSettings", "Weights"]
 
 
@@ -23,7 +25,8 @@ class GaitSettings:
     step_height: float = 0.07
 
     def __post_init__(self) -> None:
-        _require(self, "mpc.gait", step_duration=">0", step_height=">=0")
+        check_settings(self, positive=("step_duration",), non_negative=("step_height",),
+                       prefix="mpc.gait.")
         if not (isinstance(self.duty_factor, (int, float)) and 0 < self.duty_factor <= 1):
             raise ValueError(f"'mpc.gait.duty_factor' must be in (0, 1], got "
                              f"{self.duty_factor!r}")
@@ -103,13 +106,10 @@ class MpcSettings:
     max_extrapolation: float = 0.005
 
     def __post_init__(self) -> None:
-        _require(self, "mpc", dt=">0", barrier_mu=">0", barrier_delta=">0",
-                 rho_init=">0", pose_leash=">=0", yaw_leash=">=0", pose_jump=">0",
-                 max_extrapolation=">=0")
-        if self.friction is not None:
-            _require(self, "mpc", friction=">0")
-        if self.base_height is not None:
-            _require(self, "mpc", base_height=">0")
+        check_settings(self, positive=("dt", "friction", "base_height", "barrier_mu",
+                                       "barrier_delta", "rho_init", "pose_jump"),
+                       non_negative=("pose_leash", "yaw_leash", "max_extrapolation"),
+                       prefix="mpc.")
         for name in ("n_nodes", "iterations"):
             value = getattr(self, name)
             if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
@@ -140,15 +140,6 @@ def _check(data: dict, cls: type, where: str) -> None:
 
 def _number(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def _require(obj: Any, where: str, **rules: str) -> None:
-    """ValueError unless each named field is a finite number obeying its rule ('>0' or
-    '>=0'), naming the field."""
-    for name, rule in rules.items():
-        x = getattr(obj, name)
-        if not (_number(x) and (x > 0 if rule == ">0" else x >= 0)):
-            raise ValueError(f"'{where}.{name}' must be a finite number {rule}, got {x!r}")
 
 
 def _checked(data: Any, cls: type, where: str) -> dict:

@@ -16,11 +16,10 @@ The file is looked up like the robot configs (:func:`horizon_mpc.config.config_d
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 from typing import Any, TypeVar
 
-from horizon_mpc.config import find_config_file, read_yaml
+from horizon_mpc.config import check_settings, field_default, find_config_file, read_yaml
 
 __all__ = ["MotionConfig", "check_settings", "load_motion_config"]
 
@@ -57,15 +56,7 @@ class MotionConfig:
             where = "--set" if given else (self.source or self.motion)
             raise ValueError(f"{where}: unknown setting(s) {given or unknown} for motion "
                              f"{self.motion!r}; known: {sorted(fields)}")
-        return cls(**{k: _checked_value(k, v, _default(fields[k])) for k, v in values.items()})
-
-
-def _default(field: dataclasses.Field) -> Any:
-    if field.default is not dataclasses.MISSING:
-        return field.default
-    if field.default_factory is not dataclasses.MISSING:
-        return field.default_factory()
-    return None
+        return cls(**{k: _checked_value(k, v, field_default(fields[k])) for k, v in values.items()})
 
 
 def _checked_value(key: str, value: Any, default: Any) -> Any:
@@ -128,26 +119,3 @@ def load_motion_config(motion: str | Path) -> MotionConfig:
         robots={str(k): dict(v or {}) for k, v in robots.items()},
         source=path,
     )
-
-
-def check_settings(settings: object, positive: tuple[str, ...] = (),
-                   non_negative: tuple[str, ...] = ()) -> None:
-    """Check a settings dataclass: every number finite, those in ``positive`` > 0, those in
-    ``non_negative`` >= 0 (an optional number, None by default, is checked when given).
-
-    Raises:
-        ValueError: naming the setting (the CLI turns it into one line, exit code 2).
-    """
-    for f in dataclasses.fields(settings):
-        value = getattr(settings, f.name)
-        if value is None or isinstance(value, (list, tuple, dict)) or isinstance(
-                _default(f), str):
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"setting {f.name!r} must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ValueError(f"setting {f.name!r} must be finite, got {value!r}")
-        if f.name in positive and not value > 0:
-            raise ValueError(f"setting {f.name!r} must be > 0, got {value!r}")
-        if f.name in non_negative and value < 0:
-            raise ValueError(f"setting {f.name!r} must be >= 0, got {value!r}")

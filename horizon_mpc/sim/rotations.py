@@ -7,6 +7,8 @@ Plain numpy on purpose: these run a few times per published state, not per physi
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = [
@@ -58,9 +60,10 @@ def quat_from_yaw(yaw: float) -> np.ndarray:
 
 
 def quat_yaw(quat: np.ndarray) -> float:
-    """Yaw (rad, in (-pi, pi]) of the quaternion ``(x, y, z, w)`` (ZYX Euler convention)."""
-    x, y, z, w = quat
-    return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+    """Yaw (rad, in (-pi, pi]) of the quaternion ``(x, y, z, w)`` of any norm (ZYX Euler
+    convention); plain floats (the MPC calls it every tick)."""
+    x, y, z, w = np.asarray(quat, dtype=float).tolist()
+    return math.atan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
 
 
 def transform_multiply(

@@ -135,8 +135,7 @@ class Projection:
     Shapes: P_e (N, nu), P_x (N, nu, ndx), Z (N, nu, nu) (columns of the range of D^T are
     zero), free (N, nu) (1 for null-space columns), pinv (N, nu, m) and ``rows`` (N, m) the
     mask of real rows; ``constrained`` (N,) marks nodes with at least one row;
-    ``rank_deficient`` counts nodes whose rows could not all be met (least squares), and
-    ``unmet`` (N,) marks them (None: not computed, no projected row).
+    ``rank_deficient`` counts nodes whose rows could not all be met (least squares).
     """
 
     P_e: np.ndarray
@@ -147,7 +146,6 @@ class Projection:
     rows: np.ndarray
     constrained: np.ndarray
     rank_deficient: int
-    unmet: np.ndarray | None = None
 
     def dependent(self) -> np.ndarray:
         """(N,) nodes whose rows are (nearly) dependent in the input (rank below the number
@@ -206,7 +204,7 @@ def project(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarra
     else:
         sol = _qr_solve(W_flat, rows, nu, rtol, compiled=compiled)
     return Projection(sol.P_e, sol.P_x, sol.Z, sol.free, sol.pinv, rows, rows.any(axis=1),
-                      int(np.count_nonzero(sol.unmet)), np.asarray(sol.unmet, bool))
+                      int(np.count_nonzero(sol.unmet)))
 
 
 def _compiled() -> bool:

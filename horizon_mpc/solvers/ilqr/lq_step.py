@@ -259,8 +259,7 @@ class CompiledLqStep:
             fill_by_svd({"P_x": self.P_x, "P_e": self.P_e, "Z": self.Z, "free": self.free,
                          "pinv": pinv, "unmet": unmet}, W_flat, rows, fb, self.nu, self.rtol)
         self._projection = Projection(self.P_e, self.P_x, self.Z, self.free, pinv, rows,
-                                      self._con.view(bool), int(np.count_nonzero(unmet)),
-                                      unmet)
+                                      self._con.view(bool), int(np.count_nonzero(unmet)))
         return self._projection
 
     def _set_box(self, table: ctypes.Array, first: int, box: bool) -> None:

@@ -350,11 +350,7 @@ class IlqrSolver(Solver):
         if not new.any():
             return False
         self._demoted |= new
-        X, U = self.X, self.U
-        self._gather()
-        self.X, self.U = X, U
-        if self._box is not None:
-            np.clip(self.U, self._box[0], self._box[1], out=self.U)
+        self._regather()
         log.debug("ilqr: projected rows at nodes %s go to the augmented Lagrangian (their "
                   "input Jacobians are dependent, the rows not met)", np.flatnonzero(new))
         return True
@@ -368,23 +364,27 @@ class IlqrSolver(Solver):
         """``input_bounds='auto'``: go on from the current iterate with the input bounds kept
         by the backward pass (the problem read again, those rows out of the augmented
         Lagrangian, the inputs clipped into them, the regularisation reset). Returns the
-        evaluation to go on with: ``ev`` itself when there is no input bound to keep."""
+        evaluation to go on with: ``ev`` itself when there is no input bound (and the call
+        stays as it was)."""
         prb = self.prb
         if not (np.isfinite(prb.stacked("input", "lower_bounds", copy=False)).any()
                 or np.isfinite(prb.stacked("input", "upper_bounds", copy=False)).any()):
             return ev
-        X, U = self.X, self.U
+        # a converging solve projects no row onto a bounded input (_gather): every bounded
+        # node gets its box
         self._auto_box = True
-        self._gather()
-        self.X, self.U = X, U
-        if self._box is None:  # bounds only at nodes with projected rows: as they were
-            self._auto_box = False
-            self._gather()
-            self.X, self.U = X, U
-            return ev
-        np.clip(self.U, self._box[0], self._box[1], out=self.U)
+        self._regather()
         self.mu = self.opts["mu_init"]
         return self._evaluate(self.X, self.U)
+
+    def _regather(self) -> None:
+        """Read the problem again (bounds, layout, box) in the middle of a call, going on
+        from the current iterate (its inputs clipped into the box)."""
+        X, U = self.X, self.U
+        self._gather()
+        self.X, self.U = X, U
+        if self._box is not None:
+            np.clip(self.U, self._box[0], self._box[1], out=self.U)
 
     def _box_step(self) -> bool:
         """The box of the step ``du`` at the current inputs into ``self._box_du`` (the
