@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import gc
 import itertools
+import logging
 import math
 import os
 import signal
@@ -640,8 +641,6 @@ def test_use_sim_time_set_in_a_params_file_is_not_overridden(tmp_path):
 def test_startup_errors_end_in_one_line_and_exit_code_1_interrupts_in_0(monkeypatch):
     """Out-of-range or mistyped parameters, bad YAML: one fatal line, exit code 1; a
     signal while the node is being built: exit code 0 (no traceback)."""
-    import logging
-
     import yaml
     from rclpy.exceptions import InvalidParameterValueException
 
@@ -1068,3 +1067,34 @@ def test_more_published_points_than_nodes_are_clamped_with_a_warning(context, wa
         assert "publish_points 100 is more than the horizon's" in capfd.readouterr().err
     finally:
         node.destroy_node()
+
+
+def test_help_prints_the_parameters_and_other_plain_arguments_are_named(monkeypatch, capsys):
+    """'mpc_node --help' prints its usage (every declared parameter) without building a
+    node; arguments outside --ros-args are ignored with a warning that names them."""
+    from horizon_mpc.nodes import mpc_node, sim_node
+    from horizon_mpc.nodes.mpc_parameters import parameter_names
+    from horizon_mpc.nodes.spin import spin_until_signal
+
+    def must_not_build():
+        raise AssertionError("--help built the node")
+    for exe, text in (("mpc_node", mpc_node.usage), ("sim_node", sim_node.usage)):
+        assert spin_until_signal(must_not_build, [exe, "--help"], text) == 0
+        out = capsys.readouterr().out
+        assert out.startswith(f"usage: ros2 run horizon_mpc {exe}")
+    assert mpc_node.main(["mpc_node", "-h", "--ros-args", "-p", "robot:=go2"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"\n  {name} (default " in out for name in parameter_names())
+    assert "w_posture (default" in out and "[live]" in out
+
+    warned: list[str] = []
+    monkeypatch.setattr(logging.getLogger("horizon_mpc"), "handlers", [])  # restored after
+    monkeypatch.setattr(rclpy.logging, "get_logger", lambda name: type(
+        "L", (), {"warning": lambda self, m: warned.append(m),
+                  "fatal": lambda self, m: warned.append(m)})())
+
+    def fail():
+        raise ValueError("stop here")
+    argv = ["mpc_node", "foo", "--ros-args", "-p", "robot:=go2", "--", "bar"]
+    assert spin_until_signal(fail, argv, "usage") == 1
+    assert "ignoring arguments that are not ROS arguments: foo bar" in warned[0]

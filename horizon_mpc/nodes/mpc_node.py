@@ -10,11 +10,13 @@ mode needs; ``trigger: timer`` ticks at ``control_rate`` on the node's clock.
 
 from __future__ import annotations
 
+import functools
 import gc
 import itertools
 import math
 import re
 import sys
+import textwrap
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -48,7 +50,13 @@ from horizon_mpc.nodes.mpc_outputs import (
     fill_trajectory,
     period_ns,
 )
-from horizon_mpc.nodes.mpc_parameters import LIVE_LIMITS, MpcParameters, timing_warnings
+from horizon_mpc.nodes.mpc_parameters import (
+    LIVE_LIMITS,
+    MODEL_PARAMETER_DECLARATIONS,
+    MpcParameters,
+    parameter_table,
+    timing_warnings,
+)
 from horizon_mpc.nodes.robot_description import check_urdf_text
 from horizon_mpc.nodes.spin import spin_until_signal
 
@@ -74,12 +82,8 @@ class MpcNode(MpcParameters, Node):
     ) -> None:
         super().__init__(node_name, parameter_overrides=list(parameter_overrides or []),
                          **kwargs)
-        self._declare("robot", "go2", "robot config name (config/<robot>.yaml)", ro=True)
-        self._declare("config", "", "path of a robot config YAML (overrides 'robot')", ro=True)
-        self._declare("urdf_path", "", "URDF file of the robot model (overrides the config's "
-                      "URDF; the config still gives feet, posture, gains, weights)", ro=True)
-        self._declare("robot_description", "", "URDF XML text of the robot model, as "
-                      "robot_state_publisher's parameter (overrides urdf_path)", ro=True)
+        for name, default, description in MODEL_PARAMETER_DECLARATIONS:
+            self._declare(name, default, description, ro=True)
         cfg = load_robot_config(self._p("config") or self._p("robot"))
         settings = (mpc.settings if mpc is not None
                     else MpcSettings.from_dict(cfg.section("mpc")))
@@ -532,7 +536,24 @@ def main(args: Sequence[str] | None = None) -> int:
     ``use_sim_time`` defaults to true here (see :func:`with_sim_time_default`).
     """
     return spin_until_signal(_node_with_frozen_startup,
-                             with_sim_time_default(sys.argv if args is None else args))
+                             with_sim_time_default(sys.argv if args is None else args), usage)
+
+
+def usage() -> str:
+    """The ``--help`` text: what the node does, its topics and its parameters."""
+    wrap = functools.partial(textwrap.fill, width=92)
+    lines = ["usage: ros2 run horizon_mpc mpc_node [--ros-args -p NAME:=VALUE ... "
+             "--params-file FILE -r FROM:=TO]", "",
+             wrap(" ".join(__doc__.split("\n\n")[1].split()).replace("``", "'")), "",
+             wrap("Parameters (library defaults; a robot config's mpc: section overrides "
+                  "them). [live]: also changed while running (ros2 param set); the others "
+                  "at start-up only. use_sim_time defaults to true. Details: "
+                  "doc/mpc_node.md."), ""]
+    for name, default, description, read_only in parameter_table():
+        lines.append(f"  {name} (default {default!r}){'' if read_only else ' [live]'}")
+        lines.append(textwrap.fill(description, width=92, initial_indent=" " * 6,
+                                   subsequent_indent=" " * 6))
+    return "\n".join(lines)
 
 
 def _node_with_frozen_startup() -> MpcNode:

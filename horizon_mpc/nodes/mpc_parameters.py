@@ -24,14 +24,24 @@ from horizon_mpc.locomotion.gaits import GAITS
 from horizon_mpc.locomotion.settings import Weights
 from horizon_mpc.nodes.declare import declare, float_range, int_range
 
-__all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MODEL_PARAMETERS", "WEIGHT_FIELDS",
-           "MpcParameters", "parameter_names", "timing_warnings"]
+__all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MODEL_PARAMETERS",
+           "MODEL_PARAMETER_DECLARATIONS", "WEIGHT_FIELDS", "MpcParameters", "parameter_names",
+           "parameter_table", "timing_warnings"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
 LIVE_LIMITS = ("max_vx", "max_vy", "max_wz")
-# declared by MpcNode itself, before the settings they choose are read
-MODEL_PARAMETERS = ("robot", "config", "urdf_path", "robot_description")
+# declared by MpcNode itself, before the settings they choose are read: name, default,
+# description (all read-only)
+MODEL_PARAMETER_DECLARATIONS = (
+    ("robot", "go2", "robot config name (config/<robot>.yaml)"),
+    ("config", "", "path of a robot config YAML (overrides 'robot')"),
+    ("urdf_path", "", "URDF file of the robot model (overrides the config's URDF; the config "
+     "still gives feet, posture, gains, weights)"),
+    ("robot_description", "", "URDF XML text of the robot model, as robot_state_publisher's "
+     "parameter (overrides urdf_path)"),
+)
+MODEL_PARAMETERS = tuple(d[0] for d in MODEL_PARAMETER_DECLARATIONS)
 # Hz of the node clock: a status every fifth 50 Hz tick (diagnostic tools poll at ~1 Hz);
 # its values summarise the ticks in between (solve_time_max_ms, ticks, deadline_misses)
 DIAGNOSTICS_RATE = 10.0
@@ -197,17 +207,26 @@ class MpcParameters:
         return SetParametersResult(successful=True)
 
 
+def parameter_table(settings: MpcSettings | None = None
+                    ) -> list[tuple[str, object, str, bool]]:
+    """``(name, default, description, read_only)`` of every parameter the MPC node declares
+    (``use_sim_time``, rclpy's own, aside), in declaration order, without building a node;
+    defaults from ``settings`` (None: the library's, not a robot config's)."""
+    rows = {name: (default, text, True) for name, default, text in MODEL_PARAMETER_DECLARATIONS}
+
+    class _Table(MpcParameters):
+        def _declare(self, name: str, default: object, description: str, *args: object,
+                     ro: bool = False, **kwargs: object) -> None:
+            rows[name] = (default, description, ro)
+
+        def _p(self, name: str) -> object:
+            return rows[name][0]
+
+    _Table()._declare_parameters(settings or MpcSettings())
+    return [(name, *row) for name, row in rows.items()]
+
+
 def parameter_names() -> tuple[str, ...]:
     """The names of every parameter the MPC node declares (``use_sim_time``, rclpy's own,
     aside), without building a node: what a launcher checks ``-p NAME=VALUE`` against."""
-    values: dict[str, object] = dict.fromkeys(MODEL_PARAMETERS, "")
-
-    class _Names(MpcParameters):
-        def _declare(self, name: str, default: object, *args: object, **kwargs: object) -> None:
-            values[name] = default
-
-        def _p(self, name: str) -> object:
-            return values[name]
-
-    _Names()._declare_parameters(MpcSettings())
-    return tuple(values)
+    return tuple(row[0] for row in parameter_table())

@@ -20,6 +20,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import textwrap
 import time
 from collections.abc import Sequence
 
@@ -355,7 +356,22 @@ class SimNode(Node):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Entry point of ``ros2 run horizon_mpc sim_node``; exit code 0 on SIGINT/SIGTERM."""
-    return spin_until_signal(SimNode, args)
+    return spin_until_signal(SimNode, args, usage)
+
+
+def usage() -> str:
+    """The ``--help`` text: what the node does and where its parameters are described."""
+    short = __doc__.split("In short:")[1].split("\n\nThe physics")[0]
+    text = " ".join(short.replace("*", "").split()).replace("``", "'")
+    return "\n".join([
+        "usage: ros2 run horizon_mpc sim_node [--ros-args -p NAME:=VALUE ... "
+        "--params-file FILE]", "",
+        textwrap.fill(f"The PyBullet simulator of a robot config as a ROS 2 node: {text}",
+                      width=92), "",
+        textwrap.fill("Parameters (robot, urdf_path, physics_rate, state_rate, realtime_factor, "
+                      "lockstep, control_period, kp, kd, friction, initial pose, push and "
+                      "time-out settings): doc/simulator.md, or `ros2 param describe` on the "
+                      "running node.", width=92)])
 
 
 if __name__ == "__main__":

@@ -24,8 +24,14 @@ __all__ = ["forward_library_warnings", "spin_until_signal"]
 _USER_ERRORS = (ValueError, KeyError, OSError, ParameterException, yaml.YAMLError)
 
 
-def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None = None) -> int:
+def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None = None,
+                      usage: str | Callable[[], str] | None = None) -> int:
     """Create the node with ``make_node`` and spin it until SIGINT/SIGTERM; returns 0.
+
+    ``args``: the process's arguments (``sys.argv`` when None; the first is the program).
+    ``-h``/``--help`` before ``--ros-args`` prints ``usage`` (a text, or a function that
+    makes it) and returns 0 without building the node; other arguments outside
+    ``--ros-args`` are not ROS arguments: the node ignores them, with a warning naming them.
 
     A node that cannot be built from its parameters (``make_node`` raises ValueError,
     KeyError, OSError, an rclpy ParameterException or a YAML error: unknown robot, missing
@@ -38,6 +44,11 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
     The signals only set a flag that the spin loop checks (rclpy's own handlers would shut
     the context down under a running executor, which can surface as an RCLError).
     """
+    argv = list(sys.argv if args is None else args)
+    plain = _plain_arguments(argv[1:])
+    if usage is not None and ({"-h", "--help"} & set(plain)):
+        sys.stdout.write((usage() if callable(usage) else usage).rstrip("\n") + "\n")
+        return 0
     stop = threading.Event()
     starting = True
 
@@ -48,7 +59,7 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except RuntimeError as exc:  # rclpy's RCLError: e.g. a dangling '-p'
         sys.stderr.write(f"cannot start: bad ROS arguments: {exc}\n")
         _restore(previous)
@@ -61,6 +72,9 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
     executor = SingleThreadedExecutor()
     log = rclpy.logging.get_logger("horizon_mpc")
     forward_library_warnings()
+    if plain:
+        log.warning(f"ignoring arguments that are not ROS arguments: {' '.join(plain)} "
+                    "(parameters go after --ros-args: --ros-args -p name:=value)")
     try:
         try:
             node = make_node()
@@ -94,6 +108,19 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
         rclpy.try_shutdown()
         _restore(previous)
     return 0
+
+
+def _plain_arguments(args: Sequence[str]) -> list[str]:
+    """The arguments outside ``--ros-args ... [--]`` blocks (the program name left out)."""
+    out, in_ros = [], False
+    for a in args:
+        if a == "--ros-args":
+            in_ros = True
+        elif in_ros and a == "--":
+            in_ros = False
+        elif not in_ros:
+            out.append(a)
+    return out
 
 
 class _StartupInterrupted(BaseException):
