@@ -141,6 +141,29 @@ def test_node_selections_accept_masks_and_integer_arrays():
         select_nodes(np.array([1, 6]), 6, "cost 'c'")
 
 
+def test_per_node_values_go_to_the_nodes_in_the_order_they_are_listed(prb):
+    """Column j of a (dim, n) value goes to the j-th node listed: nodes=[8, 3] with the
+    values (-1, 2) put -1 on node 8 (they were sorted first: IPOPT then met swapped
+    waypoints and called it a success). A node listed twice is refused."""
+    u = prb.get_variable("u")
+    par = prb.create_parameter("ref", 1)
+    con = prb.create_constraint("waypoint", prb.get_variable("x")[0], nodes=[3, 8])
+    for nodes in ([8, 3], range(8, 2, -5), np.array([8, 3]), slice(8, 2, -5)):
+        u.set_bounds([[-1.0, 2.0]], [[3.0, 6.0]], nodes=nodes)
+        u.set_initial_guess([[-1.0, 2.0]], nodes=nodes)
+        par.assign([[-1.0, 2.0]], nodes=nodes)
+        con.set_bounds([[-1.0, 2.0]], [[-1.0, 2.0]], nodes=nodes)
+        for values in (u.lower_bounds, u.upper_bounds - 4.0, u.initial_guess, par.values,
+                       con.lower_bounds, con.upper_bounds):
+            np.testing.assert_array_equal(values[0, [8, 3]], [-1.0, 2.0])
+    for setter in (lambda: u.set_initial_guess([[1.0, 2.0, 3.0]], nodes=[1, 1, 2]),
+                   lambda: con.set_bounds(0.0, 0.0, nodes=[3, 3])):
+        with pytest.raises(ValueError, match=r"node\(s\) \[.\] listed more than once"):
+            setter()
+    con.set_nodes([3, 3, 8])  # a node set (no values) may name a node twice
+    assert con.nodes.tolist() == [3, 8]
+
+
 def test_a_list_of_bools_is_a_mask_and_bools_or_fractions_are_not_nodes():
     """Read as ints, [False, False, True] would select nodes 0 and 1 and True node 1."""
     from horizon_mpc.problem.nodes import select_nodes
@@ -278,17 +301,32 @@ def test_nan_bounds_and_crossed_one_sided_bounds_are_refused(prb):
     (lambda p, x, u: p.set_dt(float("inf")), ValueError, "finite number > 0"),
     (lambda p, x, u: p.set_dt(float("nan")), ValueError, "finite number > 0"),
     (lambda p, x, u: p.set_dt("0.1"), TypeError, "dt: got the string"),
+    (lambda p, x, u: p.set_dt(np.array([-0.1])), ValueError, "finite number > 0, got -0.1"),
+    (lambda p, x, u: p.set_dt(cs.DM(0.0)), ValueError, "finite number > 0, got 0"),
+    (lambda p, x, u: p.set_dt([-0.1]), ValueError, "finite number > 0"),
+    (lambda p, x, u: p.set_dt(True), TypeError, "got the bool"),
+    (lambda p, x, u: p.create_general_cost("g", cs.MX.sym("m")), TypeError,
+     "general cost 'g': got a CasADi MX"),
+    (lambda p, x, u: p.create_general_cost("g", "x"), TypeError, "general cost 'g': got the"),
     (lambda p, x, u: p.create_constraint("c", x[0], bounds=1.0), TypeError, r"pair \(lb, ub\)"),
     (lambda p, x, u: p.set_stacked_initial_guess("states", np.zeros((2, 11))), KeyError,
      "kinds are: state"),
 ], ids=["mx_term", "string_cost", "mx_dynamics", "string_in_list", "dt_inf", "dt_nan",
-        "dt_string", "scalar_bounds", "unknown_kind"])
+        "dt_string", "dt_negative_array", "dt_zero_dm", "dt_negative_list", "dt_bool",
+        "mx_general_cost", "string_general_cost", "scalar_bounds", "unknown_kind"])
 def test_expressions_and_values_of_the_wrong_kind_are_named(prb, build, error, match):
     # raw CasADi 'Wrong number or type of arguments for overloaded function' and
-    # KeyError('states') before; inf dt was accepted and failed at solve time
+    # KeyError('states') before; inf dt was accepted and failed at solve time; a negative
+    # dt in an array, list or DM was solved backwards in time and called a success
     x, u = prb.get_variable("x"), prb.get_variable("u")
     with pytest.raises(error, match=match):
         build(prb, x, u)
+
+
+def test_a_constant_dt_in_an_array_is_that_number(prb):
+    for value in (np.array([0.05]), [0.05], cs.DM(0.05), np.float32(0.05)):
+        prb.set_dt(value)
+        assert isinstance(prb.dt, float) and prb.dt == pytest.approx(0.05)
 
 
 def test_dynamics_may_be_a_list_of_expressions(prb):
@@ -328,6 +366,11 @@ def test_options_of_the_wrong_type_are_refused_by_name(prb, name, opts, match):
     ("ilqr", {"time_budget": -0.01}, "'time_budget' .* must be >0"),
     ("gnsqp", {"regularization": -1.0}, "'regularization' .* must be >=0"),  # QP failed
     ("gnsqp", {"armijo": 1.0}, "'armijo' .* must be \\(0,1\\)"),
+    ("ipopt", {"max_iter": -5}, "'max_iter' of solver 'ipopt' must be >=0"),
+    ("ipopt", {"tol": -1.0}, "'tol' .* must be >0"),
+    ("ipopt", {"constr_viol_tol": float("nan")}, "'constr_viol_tol' .* must be >0"),
+    ("ipopt", {"print_level": 99}, "'print_level' .* must be \\[0,12\\]"),
+    ("ilqr", {"mu_max": 1e-12}, "mu_min 1e-10 is above mu_max 1e-12"),
 ])
 def test_options_out_of_their_range_are_refused_by_name(prb, name, opts, match):
     """rho_init 0 ended a solve in 'linearisation not finite', regularization -1 in a QP
@@ -337,6 +380,16 @@ def test_options_out_of_their_range_are_refused_by_name(prb, name, opts, match):
     solver = make_solver(name, prb)
     with pytest.raises(ValueError, match=match):  # set_option checks the same
         solver.set_option(*next(iter(opts.items())))
+
+
+def test_options_not_given_as_a_dict_or_a_callback_that_cannot_be_called_are_refused(prb):
+    """A list of pairs was an AttributeError from deep in the IPOPT wrapper; an ILQR
+    callback 3 failed only at the first iteration."""
+    with pytest.raises(TypeError, match="options of solver 'ipopt' must be a dict"):
+        make_solver("ipopt", prb, [("max_iter", 5)])
+    with pytest.raises(TypeError, match="'callback' must be callable"):
+        make_solver("ilqr", prb, {"callback": 3})
+    make_solver("ilqr", prb, {"callback": print})
 
 
 def test_a_none_default_option_takes_a_number_or_none(prb):

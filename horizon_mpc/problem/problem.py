@@ -210,16 +210,28 @@ class Problem:
         return self._xdot
 
     def set_dt(self, dt: float | SingleVariable | Parameter | cs.SX) -> None:
-        """Set the interval duration: a number, a single variable or a parameter."""
-        if isinstance(dt, (int, float, np.floating, np.integer)) and not isinstance(dt, bool):
+        """Set the interval duration: a number, a single variable or a parameter (or an
+        expression of those).
+
+        Raises:
+            TypeError: a bool, or something that is not a number or an expression.
+            ValueError: a constant that is not a finite number > 0 (also one given as a
+                one-element array, list or DM), or a non-scalar expression.
+        """
+        if isinstance(dt, (bool, np.bool_)):
+            raise TypeError(f"dt must be a number or an expression, got the bool {dt}")
+        if not isinstance(dt, (int, float, np.floating, np.integer)):
+            dt = self._as_sx(dt, "dt")
+            if dt.shape != (1, 1):
+                raise ValueError(f"dt must be a scalar, got an expression of shape {dt.shape}")
+            if dt.is_constant():  # a number in an array, list or DM
+                dt = float(cs.evalf(dt))
+        if isinstance(dt, (int, float, np.floating, np.integer)):
             if not (dt > 0 and math.isfinite(dt)):
                 raise ValueError(f"dt must be a finite number > 0, got {dt}")
             self._dt = float(dt)
             self._revision += 1
             return
-        dt = self._as_sx(dt, "dt")
-        if dt.shape != (1, 1):
-            raise ValueError(f"dt must be a scalar, got an expression of shape {dt.shape}")
         if cs.depends_on(dt, self.x) or cs.depends_on(dt, self.u):
             raise ValueError("dt may depend on single variables and parameters only")
         self._check_symbols(dt, "dt", allow_offsets=False)
@@ -421,7 +433,7 @@ class Problem:
 
     def create_general_cost(self, name: str, expr, nodes: NodeSelection = None) -> GeneralCost:
         """A general scalar cost ``sum_k expr_k`` (IPOPT only; GN solvers refuse it)."""
-        expr = cs.SX(expr) if not isinstance(expr, cs.SX) else expr
+        expr = self._as_sx(expr, f"general cost {name!r}")
         if expr.shape != (1, 1):
             raise ValueError(f"general cost {name!r} must be scalar, got shape {expr.shape}")
         return self._add_term(GeneralCost, self.costs, name, expr, nodes)

@@ -122,7 +122,8 @@ class Constraint(Term):
     def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:
         """Set the bounds on ``nodes`` (None: all nodes); scalar, (dim,) or (dim, n_sel)."""
         idx = (np.arange(self.n_nodes + 1) if nodes is None
-               else select_nodes(nodes, self.n_nodes + 1, f"constraint {self.name!r}"))
+               else select_nodes(nodes, self.n_nodes + 1, f"constraint {self.name!r}",
+                                 ordered=True))
         lo = broadcast_values(lb, self.dim, idx.size, f"lower bound of {self.name!r}")
         hi = broadcast_values(ub, self.dim, idx.size, f"upper bound of {self.name!r}")
         check_bounds(lo, hi, f"constraint {self.name!r}")

@@ -67,12 +67,14 @@ class Variable(cs.SX):
 
     def _columns(self, nodes: NodeSelection) -> tuple[slice | np.ndarray, int]:
         """The columns of ``nodes`` and their number: a slice for every node or one node
-        (the per-tick calls: no index arrays), else the sorted node indices."""
+        (the per-tick calls: no index arrays), else the node indices in the caller's order
+        (column j of a per-node value goes to the j-th node listed)."""
         if nodes is None:
             return slice(None), self.n_values
         if type(nodes) is int and 0 <= nodes < self.n_values:
             return slice(nodes, nodes + 1), 1
-        idx = select_nodes(nodes, self.n_values, f"{self.kind} variable {self.name!r}")
+        idx = select_nodes(nodes, self.n_values, f"{self.kind} variable {self.name!r}",
+                           ordered=True)
         return idx, idx.size
 
     def _values(self, value, n: int, what: str) -> np.ndarray:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import numbers
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -65,12 +66,17 @@ class Solver:
     DEFAULTS: dict[str, Any] = {}
     COMMON = {"warm_start": True, "verbose": False}
     #: option -> the values it takes: '>0', '>=0', '>=1' (a number; None passes where the
-    #: default is None) or '(0,1)'; checked with the type, ValueError naming the option
+    #: default is None), '(0,1)' or '[lo,hi]'; checked with the type, ValueError naming
+    #: the option
     RANGES: dict[str, str] = {}
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         self.prb = prb
-        self.opts = self._merge_options(opts or {})
+        if opts is not None and not isinstance(opts, Mapping):
+            raise TypeError(f"options of solver {self.name!r} must be a dict (name -> value), "
+                            f"got {type(opts).__name__}")
+        self.opts = self._merge_options(dict(opts or {}))
+        self._check_together(self.opts)
         prb.finalize()
         self._structure_revision = prb.structure_revision
         self.solution: dict[str, np.ndarray] = {}
@@ -110,6 +116,10 @@ class Solver:
                 self._check_option_range(key, value)
         return {**known, **opts}
 
+    def _check_together(self, opts: dict[str, Any]) -> None:
+        """ValueError/TypeError when options are inconsistent with each other (e.g. a
+        minimum above its maximum): a hook, run on every change with all the options."""
+
     def _check_option_range(self, key: str, value: Any) -> None:
         """ValueError unless a number option is within its :attr:`RANGES` (NaN never is)."""
         rule = self.RANGES.get(key)
@@ -119,7 +129,11 @@ class Solver:
             raise TypeError(f"option {key!r} of solver {self.name!r} must be a number, got "
                             f"{value!r} ({type(value).__name__})")
         x = float(value)
-        ok = {">0": x > 0, ">=0": x >= 0, ">=1": x >= 1, "(0,1)": 0 < x < 1}[rule]
+        if rule.startswith("["):  # a closed interval "[lo,hi]"
+            lo, hi = (float(b) for b in rule[1:-1].split(","))
+            ok = lo <= x <= hi
+        else:
+            ok = {">0": x > 0, ">=0": x >= 0, ">=1": x >= 1, "(0,1)": 0 < x < 1}[rule]
         if not ok:
             raise ValueError(f"option {key!r} of solver {self.name!r} must be {rule}, got "
                              f"{value!r}")
@@ -152,6 +166,7 @@ class Solver:
     def set_option(self, key: str, value: Any) -> None:
         """Change one option between solves."""
         self._merge_options({key: value})  # validates the name
+        self._check_together({**self.opts, key: value})
         self.opts[key] = value
 
     def solve(self) -> bool:

@@ -59,6 +59,8 @@ class IpoptSolver(NlpSolver):
         "warm_start_duals": True,
         "warm_mu_init": 1e-4, "warm_bound_push": 1e-6,
     }
+    RANGES = {"max_iter": ">=0", "tol": ">0", "constr_viol_tol": ">0", "print_level": "[0,12]",
+              "warm_mu_init": ">0", "warm_bound_push": ">0"}
     _IPOPT_ALIASES = ("max_iter", "tol", "constr_viol_tol", "print_level", "linear_solver")
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):

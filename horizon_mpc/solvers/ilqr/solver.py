@@ -139,6 +139,14 @@ class IlqrSolver(Solver):
         "barrier_mu": ">0", "barrier_delta": ">0",
     }
 
+    def _check_together(self, opts: dict[str, Any]) -> None:
+        for lo, hi in (("mu_min", "mu_max"), ("rho_init", "rho_max")):
+            if opts[lo] > opts[hi]:
+                raise ValueError(f"ilqr options: {lo} {opts[lo]!r} is above {hi} {opts[hi]!r}")
+        if opts["callback"] is not None and not callable(opts["callback"]):
+            raise TypeError(f"ilqr option 'callback' must be callable (called with a dict per "
+                            f"iteration) or None, got {opts['callback']!r}")
+
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
         if self.opts["equality"] not in ("projection", "lagrangian"):
