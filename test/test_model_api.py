@@ -141,6 +141,17 @@ def test_missing_urdf_file_is_reported(tmp_path):
         RobotModel.from_urdf(tmp_path / "nope.urdf")
 
 
+def test_the_urdf_parsers_reason_is_in_the_error():
+    """urdfdom prints why a URDF is invalid on stderr and raises 'does not contain a valid
+    URDF model' only: the reason is in the ValueError now."""
+    urdf = ('<robot name="r"><link name="a"/><link name="b"/><joint name="j1" '
+            'type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/></joint>'
+            '</robot>')
+    with pytest.raises(ValueError, match=r"Joint \[j1\] is of type REVOLUTE but it does not "
+                       "specify limits"):
+        RobotModel.from_urdf(urdf)
+
+
 def test_malformed_urdf_is_reported():
     with pytest.raises(ValueError, match="malformed URDF"):
         RobotModel.from_urdf('<robot name="x"><link name="a"></robot>')

@@ -134,3 +134,44 @@ def test_centroidal_momentum_matches_pinocchio(case):
 
     (h,) = evaluate(m.centroidal_momentum(), s["q"], s["v"])
     assert rel_err(h[:, 0, :], _columns(ref, s, "q", "v")) < TOL
+
+
+_INERTIAL = ('<inertial><origin xyz="0.1 0.02 -0.03"/><mass value="1.5"/><inertia ixx="0.1" '
+             'ixy="0.01" ixz="0" iyy="0.2" iyz="0" izz="0.3"/></inertial>')
+
+
+def test_a_second_free_flyer_below_the_root_has_the_crba_of_pinocchio():
+    """A URDF 'floating' joint under the model's own free-flyer: its 6-column block of the
+    CRBA was pushed through a 3-vector cross product (a CasADi dimension error)."""
+    from horizon_mpc.model import RobotModel
+
+    urdf = (f'<robot name="stacked"><link name="odom">{_INERTIAL}</link>'
+            f'<link name="base">{_INERTIAL}</link><link name="arm">{_INERTIAL}</link>'
+            '<joint name="float" type="floating"><parent link="odom"/><child link="base"/>'
+            '</joint><joint name="j" type="revolute"><origin xyz="0.2 0 0" rpy="0.3 0 0"/>'
+            '<parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>'
+            '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>')
+    m = RobotModel.from_urdf(urdf)
+    pm = m.pin_model
+    assert (pm.nq, pm.nv) == (15, 13)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        q = pin.randomConfiguration(pm, -np.ones(pm.nq), np.ones(pm.nq))
+        ref = pin.crba(pm, pm.createData(), q)
+        ref = np.triu(ref) + np.triu(ref, 1).T
+        assert rel_err(np.asarray(m.mass_matrix()(q)), ref) < TOL
+        v, a = rng.normal(size=pm.nv), rng.normal(size=pm.nv)
+        tau = np.asarray(m.inverse_dynamics()(q, v, a, np.zeros(0))).ravel()
+        assert rel_err(tau, pin.rnea(pm, pm.createData(), q, v, a)) < TOL
+
+
+def test_a_joint_with_a_zero_axis_is_refused_by_name():
+    """<axis xyz="0 0 0"/> built a model of NaNs with only a numpy warning."""
+    from horizon_mpc.model import RobotModel
+
+    urdf = (f'<robot name="zero"><link name="a">{_INERTIAL}</link><link name="b">{_INERTIAL}'
+            '</link><joint name="j1" type="revolute"><parent link="a"/><child link="b"/>'
+            '<axis xyz="0 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+            '</robot>')
+    with pytest.raises(ValueError, match="joint 'j1' has a zero axis"):
+        RobotModel.from_urdf(urdf, floating_base=False)

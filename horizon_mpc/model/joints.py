@@ -98,8 +98,13 @@ class JointSpec:
         return (axis, zero) if self.kind == _PRISMATIC else (zero, axis)
 
 
-def _classify(jmodel: pin.JointModel) -> tuple[str, np.ndarray]:
-    """Kind and axis of a Pinocchio joint, read from its motion subspace."""
+def _classify(jmodel: pin.JointModel, name: str = "") -> tuple[str, np.ndarray]:
+    """Kind and axis of a Pinocchio joint, read from its motion subspace.
+
+    Raises:
+        NotImplementedError: a joint type the model does not support.
+        ValueError: a joint whose axis is zero (``<axis xyz="0 0 0"/>``: it moves nothing).
+    """
     short = jmodel.shortname()
     if short == "JointModelFreeFlyer":
         return _FREE_FLYER, np.zeros(3)
@@ -112,6 +117,9 @@ def _classify(jmodel: pin.JointModel) -> tuple[str, np.ndarray]:
     jmodel.calc(jdata, _neutral(jmodel))
     s = np.asarray(jdata.S).reshape(6)
     lin, ang = s[:3], s[3:]
+    if max(np.linalg.norm(lin), np.linalg.norm(ang)) < 1e-12:
+        raise ValueError(f"joint {name!r} has a zero axis (URDF <axis xyz=\"0 0 0\"/>): it "
+                         "moves nothing; give its axis, or make it a fixed joint")
     if jmodel.nq == 2:
         return _CONTINUOUS, ang / np.linalg.norm(ang)
     if np.linalg.norm(ang) > 0.5:
@@ -128,7 +136,7 @@ def joint_specs(model: pin.Model) -> list[JointSpec]:
     specs = []
     for i in range(1, model.njoints):
         jm = model.joints[i]
-        kind, axis = _classify(jm)
+        kind, axis = _classify(jm, model.names[i])
         placement = model.jointPlacements[i]
         inertia = model.inertias[i]
         specs.append(

@@ -2,8 +2,11 @@
 
 Matches Pinocchio: the free-flyer lives on SE(3) with ``integrate(q, v) = q * exp6(v)``
 (v = [linear, angular] in the base frame), continuous joints on SO(2) stored as
-``(cos, sin)``, other joints on R. Small-angle branches use Taylor expansions so that values
-and derivatives are exact at zero (SX ``if_else`` discards the unused branch, NaN included).
+``(cos, sin)``, other joints on R. One difference: for a rotation step beyond pi, Pinocchio
+flips the resulting quaternion into the input's hemisphere; ours keeps the product (the
+same rotation, the opposite sign), which stays smooth in the step. Small-angle branches use
+Taylor expansions so that values and derivatives are exact at zero (SX ``if_else`` discards
+the unused branch, NaN included).
 """
 
 from __future__ import annotations

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pinocchio as pin
@@ -32,13 +37,42 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
         source = f"URDF file {path}"
     else:
         source = "URDF string"
+    root = (pin.JointModelFreeFlyer(),) if floating_base else ()
+    build = ((lambda: pin.buildModelFromXML(urdf, *root)) if is_xml
+             else (lambda: pin.buildModelFromUrdf(str(path), *root)))
+    with _stderr_captured() as said:
+        try:
+            return build()
+        except (ValueError, RuntimeError) as exc:
+            error = exc
+    # urdfdom prints the reason (a joint without limits, an unknown link) on stderr and
+    # raises "does not contain a valid URDF model" only
+    reason = "; ".join(line.strip().removeprefix("Error:").strip() for line in said
+                       if line.strip() and not line.strip().startswith("at line "))
+    raise ValueError(f"malformed {source}: {error}" + (f" ({reason})" if reason else "")) \
+        from error
+
+
+@contextlib.contextmanager
+def _stderr_captured() -> Iterator[list[str]]:
+    """What C code writes to file descriptor 2 inside the block, as lines in the yielded
+    list once the block has ended; it is also passed on to stderr (nothing is lost)."""
+    lines: list[str] = []
     try:
-        if is_xml and floating_base:
-            return pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer())
-        if is_xml:
-            return pin.buildModelFromXML(urdf)
-        if floating_base:
-            return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-        return pin.buildModelFromUrdf(str(path))
-    except (ValueError, RuntimeError) as exc:
-        raise ValueError(f"malformed {source}: {exc}") from exc
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no usable fd 2 (embedded interpreters): no capture
+        yield lines
+        return
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            text = tmp.read().decode("utf-8", errors="replace")
+            if text:
+                sys.stderr.write(text)
+            lines.extend(text.splitlines())

@@ -115,9 +115,13 @@ class Transform:
         return self.R.T @ (m[0] - ca.cross(self.p, m[1])), self.R.T @ m[1]
 
     def act_force(self, f: Force) -> Force:
-        """Force expressed in b -> the same force expressed in a."""
+        """Force expressed in b -> the same force expressed in a; ``f``'s parts may be
+        (3, k) blocks of k forces (a multi-DoF joint's columns in the CRBA)."""
         lin = self.R @ f[0]
-        return lin, self.R @ f[1] + ca.cross(self.p, lin)
+        if lin.size2() == 1:
+            return lin, self.R @ f[1] + ca.cross(self.p, lin)
+        moment = ca.horzcat(*(ca.cross(self.p, lin[:, c]) for c in range(lin.size2())))
+        return lin, self.R @ f[1] + moment
 
 
 def cross_motion(m1: Motion, m2: Motion) -> Motion:
