@@ -104,8 +104,10 @@ class Recording:
     deadline_misses: int = 0  # the MPC node's count (solve longer than the period)
     stale_skips: int = 0  # ticks the MPC node skipped: state older than its state_timeout
     nominal_height: float = math.nan
-    # the MPC node's command limits (vx, vy m/s, wz rad/s): commands beyond are clamped
+    # the MPC node's command limits (vx, vy m/s, wz rad/s) and its combined limit (see
+    # locomotion/command.py): commands beyond are limited
     max_velocity: list[float] | None = None
+    max_command_norm: float = math.inf
     build_time: float = math.nan  # s (wall) until the MPC could tick (realtime: 1st plan)
     mpc_process: dict = field(default_factory=dict)  # realtime: pid, memory, CPU, exit code
     mpc_log: str = ""  # realtime: the end of the MPC process's output
@@ -162,18 +164,20 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
     else:
         rec = _run_realtime(robot, iterations, loop, domain_id, mpc_parameters, mpc_command,
                             ready_timeout)
-    rec.max_velocity = command_limits(cfg, mpc_parameters)
+    rec.max_velocity, rec.max_command_norm = command_limits(cfg, mpc_parameters)
     return rec
 
 
 def command_limits(cfg: RobotConfig, mpc_parameters: Mapping[str, object] | None = None
-                   ) -> list[float]:
-    """The MPC node's command limits (vx, vy, wz) for this config and parameters: its
-    ``max_vx``/``max_vy``/``max_wz``, else the config's ``mpc.max_velocity``."""
-    limits = MpcSettings.from_dict(cfg.section("mpc")).max_velocity
+                   ) -> tuple[list[float], float]:
+    """The MPC node's command limits for this config and parameters: per axis (vx, vy, wz),
+    its ``max_vx``/``max_vy``/``max_wz``, else the config's ``mpc.max_velocity``; and the
+    combined one, ``max_command_norm`` (:func:`horizon_mpc.locomotion.command.limit_command`)."""
+    st = MpcSettings.from_dict(cfg.section("mpc"))
     given = dict(mpc_parameters or {})
-    return [float(given.get(name, lim)) for name, lim in
-            zip(("max_vx", "max_vy", "max_wz"), limits, strict=True)]
+    return ([float(given.get(name, lim)) for name, lim in
+             zip(("max_vx", "max_vy", "max_wz"), st.max_velocity, strict=True)],
+            float(given.get("max_command_norm", st.max_command_norm)))
 
 
 @dataclass

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from horizon_mpc.locomotion.command import limit_command
+
 if TYPE_CHECKING:
     from horizon_mpc.closed_loop import Recording, Segment
 
@@ -102,10 +104,9 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
         if end > run_end + 0.05:  # --duration ended the run before this segment's end
             entry.update(end=max(start, run_end), planned_end=end, cut_short=True)
         if rec.max_velocity is not None:
-            lim = np.abs(np.asarray(rec.max_velocity, float))
-            clamped = np.clip(cmd, -lim, lim)
+            clamped = np.array(limit_command(cmd, rec.max_velocity, rec.max_command_norm))
             if not np.array_equal(clamped, cmd):
-                # the node clamps such a command: the robot is scored against what it got
+                # the node limits such a command: the robot is scored against what it got
                 entry["command_clamped"] = dict(zip(AXES, clamped.tolist(), strict=True))
                 cmd = clamped
         if mask.any():

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import signal
 import subprocess
@@ -323,7 +324,8 @@ def test_other_robots_walk_forward_with_their_configs_only(robot):
 
 
 def test_a_segment_beyond_the_limits_is_scored_against_the_clamped_command():
-    """The node clamps 1.2 m/s to the 0.6 limit: a robot doing 0.6 tracked it perfectly."""
+    """The node clamps 1.2 m/s to the 0.6 limit: a robot doing 0.6 tracked it perfectly;
+    a command beyond the combined limit is scored against its scaled-down value."""
     from horizon_mpc.closed_loop import command_limits
     from horizon_mpc.config import load_robot_config
 
@@ -337,9 +339,16 @@ def test_a_segment_beyond_the_limits_is_scored_against_the_clamped_command():
     rec.max_velocity = None  # limits unknown: scored against the command as given
     assert summarise(rec, [Segment(3.0, vx=1.2)])["segments"][0]["rmse"]["vx"] == \
         pytest.approx(0.6)
+    # all three axes at their limits: beyond the combined limit, scaled down to it
+    rec.max_velocity, rec.max_command_norm = [0.6, 0.5, 0.8], math.sqrt(2)
+    seg = summarise(rec, [Segment(3.0, vx=0.6, vy=-0.5, wz=-0.8)])["segments"][0]
+    scale = math.sqrt(2 / 3)
+    assert seg["command_clamped"] == pytest.approx(
+        {"vx": 0.6 * scale, "vy": -0.5 * scale, "wz": -0.8 * scale})
     # the limits of a run: the config's, or the node parameters given
-    assert command_limits(load_robot_config("solo12")) == [0.4, 0.3, 0.6]
-    assert command_limits(load_robot_config("go2"), {"max_vx": 0.3}) == [0.3, 0.5, 0.8]
+    assert command_limits(load_robot_config("solo12")) == ([0.4, 0.3, 0.6], math.sqrt(2))
+    assert command_limits(load_robot_config("go2"), {"max_vx": 0.3, "max_command_norm": 2.0}
+                          ) == ([0.3, 0.5, 0.8], 2.0)
 
 
 def test_one_tumble_is_one_fall_and_a_second_fall_later_counts_again():

@@ -1,5 +1,7 @@
 """Gaits, the stop/start scheduler and the walking problem's consistency."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -306,3 +308,19 @@ def test_a_state_discontinuous_with_the_plan_restarts_the_controller(walking_mpc
     # ordinary motion does not restart
     plan = mpc.update(t + mpc.settings.dt, after.q[:, 1], after.v[:, 1], np.zeros(3))
     assert mpc.restarts == restarts + 1
+
+
+def test_a_command_is_limited_per_axis_then_to_the_combined_norm():
+    from horizon_mpc.locomotion.command import limit_command
+
+    lims = [0.6, 0.5, 0.8]
+    assert limit_command([0.3, -0.2, 0.1], lims) == (0.3, -0.2, 0.1)  # within: unchanged
+    assert limit_command([0.6, -0.5, 0.0], lims) == (0.6, -0.5, 0.0)  # two at their limits
+    assert limit_command([2.0, 0.0, -0.1], lims) == (0.6, 0.0, -0.1)  # clamped per axis
+    out = np.array(limit_command([0.6, -0.5, -0.8], lims))  # all three: scaled to sqrt(2)
+    np.testing.assert_allclose(out, np.array([0.6, -0.5, -0.8]) * math.sqrt(2 / 3))
+    out = np.array(limit_command([9.0, 9.0, -9.0], lims, max_norm=1.0))  # per axis, then norm
+    np.testing.assert_allclose(np.linalg.norm(out / lims), 1.0)
+    np.testing.assert_allclose(out / np.array(lims), np.array([1, 1, -1]) / math.sqrt(3))
+    assert limit_command([0.6, -0.5, -0.8], lims, max_norm=2.0) == (0.6, -0.5, -0.8)
+    assert limit_command([0.4, 0.2, 0.3], [0.0, 0.5, 0.8]) == (0.0, 0.2, 0.3)  # a zero limit

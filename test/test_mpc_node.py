@@ -77,12 +77,21 @@ def test_cmd_vel_is_finite_and_within_limits_or_rejected(vx, vy, wz):
         assert not all(math.isfinite(x) and abs(x) <= ABSURD_COMMAND for x in (vx, vy, wz))
         return
     assert np.all(np.isfinite(cmd)) and np.all(np.abs(cmd) <= LIMITS)
+    assert np.linalg.norm(cmd / np.array(LIMITS)) <= math.sqrt(2) * (1 + 1e-12)
 
 
 def test_cmd_vel_beyond_the_limits_is_clamped_with_a_note():
-    cmd, notes = command_from_twist(twist(3.0, -2.0, 0.1), LIMITS)
+    cmd, notes = command_from_twist(twist(3.0, -2.0, 0.1), LIMITS, max_norm=math.inf)
     np.testing.assert_array_equal(cmd, [1.0, -0.5, 0.1])
-    assert "clamped" in notes[0]
+    assert "limited to [1.0, -0.5, 0.1]" in notes[0]
+    # beyond the combined limit (two axes at their limits and a third): scaled down along
+    # its direction to the normalised norm sqrt(2)
+    cmd, notes = command_from_twist(twist(3.0, -2.0, 0.5), LIMITS)
+    np.testing.assert_allclose(cmd, np.array([1.0, -0.5, 0.5]) * math.sqrt(2 / 2.25))
+    assert "combined 1.41" in notes[0]
+    cmd, notes = command_from_twist(twist(1.0, 0.5, 0.0), LIMITS)  # two at their limits
+    np.testing.assert_array_equal(cmd, [1.0, 0.5, 0.0])
+    assert notes == []
 
 
 @given(

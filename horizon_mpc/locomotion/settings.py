@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from horizon_mpc.config import check_settings
+from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM
 
 __all__ = ["GaitSettings", "MpcSettings", "Weights"]
 
@@ -73,6 +74,9 @@ class MpcSettings:
     # command limits vx, vy (m/s), wz (rad/s): what the go2 trot sustains in the lockstep
     # sweep of doc/locomotion.md (0.8-1.0 m/s forward and 1.0 rad/s while walking fell)
     max_velocity: list[float] = field(default_factory=lambda: [0.6, 0.5, 0.8])
+    # the combined limit: the command's norm, each axis divided by its max_velocity, is at
+    # most this (locomotion/command.py; sqrt(2): two axes at their limits, not three)
+    max_command_norm: float = DEFAULT_MAX_NORM
     max_acceleration: list[float] = field(default_factory=lambda: [1.0, 1.0, 2.0])
     # m, rad: the pose reference (integrated from the command, the integral action of the
     # velocity tracking) is kept this close to the measured pose, so it never winds up;
@@ -107,7 +111,8 @@ class MpcSettings:
 
     def __post_init__(self) -> None:
         check_settings(self, positive=("dt", "friction", "base_height", "barrier_mu",
-                                       "barrier_delta", "rho_init", "pose_jump"),
+                                       "barrier_delta", "rho_init", "pose_jump",
+                                       "max_command_norm"),
                        non_negative=("pose_leash", "yaw_leash", "max_extrapolation"),
                        prefix="mpc.")
         for name in ("n_nodes", "iterations"):

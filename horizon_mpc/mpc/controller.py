@@ -19,6 +19,7 @@ import pinocchio as pin
 from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings, build_walking_problem, make_gait
+from horizon_mpc.locomotion.command import limit_command
 from horizon_mpc.locomotion.pose_reference import (
     advance_pose,
     base_yaw,
@@ -392,16 +393,17 @@ class WalkingMpc:
         self.solver.reset_multipliers()
 
     def _ramp_command(self, cmd: np.ndarray | None, dt: float) -> None:
-        """Move the ramped command toward ``cmd`` (None: zero; NaN/inf: zero), clamped to
-        the velocity limits, by at most the acceleration limits times ``dt``."""
+        """Move the ramped command toward ``cmd`` (None: zero; NaN/inf: zero), limited per
+        axis and as a whole (:func:`limit_command`), by at most the acceleration limits
+        times ``dt``."""
         st = self.settings
         cmd = [0.0, 0.0, 0.0] if cmd is None else np.asarray(cmd, float).tolist()
         # three numbers: plain floats (numpy's per-call overhead was ~50 us a tick here)
-        for i, (c, vmax, amax) in enumerate(zip(cmd, st.max_velocity,
-                                                 st.max_acceleration, strict=True)):
-            target = min(max(c, -vmax), vmax) if math.isfinite(c) else 0.0
+        target = limit_command([c if math.isfinite(c) else 0.0 for c in cmd],
+                               st.max_velocity, st.max_command_norm)
+        for i, (c, amax) in enumerate(zip(target, st.max_acceleration, strict=True)):
             step = amax * dt
-            self.cmd[i] += min(max(target - self.cmd[i], -step), step)
+            self.cmd[i] += min(max(c - self.cmd[i], -step), step)
 
     def _advance_pose_ref(self, q: np.ndarray, dt: float) -> None:
         st = self.settings

@@ -18,6 +18,8 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
 
+from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM, limit_command
+
 __all__ = [
     "ABSURD_COMMAND",
     "JOINT_LIMIT_MARGIN",
@@ -40,12 +42,13 @@ ABSURD_POSITION, ABSURD_LINEAR, ABSURD_ANGULAR = 1e5, 100.0, 100.0
 
 
 def command_from_twist(
-    msg: Twist, limits: Sequence[float]
+    msg: Twist, limits: Sequence[float], max_norm: float = DEFAULT_MAX_NORM
 ) -> tuple[np.ndarray, list[str]]:
-    """``(vx, vy, wz)`` (m/s, m/s, rad/s, base frame) of a ``cmd_vel`` Twist, clamped.
+    """``(vx, vy, wz)`` (m/s, m/s, rad/s, base frame) of a ``cmd_vel`` Twist, limited.
 
     Only ``linear.x``, ``linear.y`` and ``angular.z`` are used (a note says when the other
-    components are non-zero). Components beyond ``limits`` (3,) are clamped, with a note.
+    components are non-zero). Components beyond ``limits`` (3,) are clamped, and a command
+    beyond the combined limit ``max_norm`` scaled down (:func:`limit_command`), with a note.
 
     Raises:
         ValueError: a non-finite component, or one beyond :data:`ABSURD_COMMAND`.
@@ -64,9 +67,10 @@ def command_from_twist(
     if msg.linear.z != 0.0 or msg.angular.x != 0.0 or msg.angular.y != 0.0:
         notes.append("cmd_vel linear.z/angular.x/angular.y are ignored (planar command)")
     lim = [abs(float(x)) for x in limits]
-    cmd = [min(max(x, -m), m) for x, m in zip(raw, lim, strict=True)]
+    cmd = list(limit_command(raw, lim, max_norm))
     if cmd != list(raw):
-        notes.append(f"cmd_vel {list(raw)} clamped to the limits {lim}")
+        notes.append(f"cmd_vel {list(raw)} limited to {[round(c, 4) for c in cmd]} (limits "
+                     f"{lim}, combined {max_norm:.3g})")
     return np.array(cmd), notes
 
 

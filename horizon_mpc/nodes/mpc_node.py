@@ -97,6 +97,7 @@ class MpcNode(MpcParameters, Node):
         g.name, g.step_duration = self._p("gait"), self._p("step_duration")
         g.step_height, g.duty_factor = self._p("step_height"), self._p("duty_factor")
         settings.max_velocity = [self._p(n) for n in LIVE_LIMITS]
+        settings.max_command_norm = float(self._p("max_command_norm"))
         settings.stand_when_idle = bool(self._p("stand_when_idle"))
         settings.prepare_ahead = bool(self._p("prepare_ahead"))
         settings.max_extrapolation = float(self._p("max_extrapolation"))
@@ -274,7 +275,8 @@ class MpcNode(MpcParameters, Node):
 
     def _on_cmd_vel(self, msg: Twist) -> None:
         try:
-            cmd, notes = command_from_twist(msg, self.mpc.settings.max_velocity)
+            st = self.mpc.settings
+            cmd, notes = command_from_twist(msg, st.max_velocity, st.max_command_norm)
         except ValueError as exc:
             self.rejected["cmd_vel"] += 1
             self._warn("cmd_vel", f"rejected cmd_vel: {exc}; keeping the previous command")

@@ -132,6 +132,11 @@ class MpcParameters:
         for name, vmax, unit in zip(LIVE_LIMITS, st.max_velocity, ("m/s", "m/s", "rad/s"),
                                     strict=True):
             d(name, float(vmax), f"|{name[4:]}| command limit ({unit}); live", float_range(0, 5))
+        d("max_command_norm", float(st.max_command_norm), "combined command limit: the "
+          "command's norm with each axis divided by its limit (max_vx, max_vy, max_wz) is at "
+          "most this, a command beyond is scaled down along its direction (1.414: two axes at "
+          "their limits together; >= 1.733: per-axis limits only); live",
+          float_range(0.01, 2.0))
         for name in WEIGHT_FIELDS:
             value = getattr(st.weights, name)
             value = [float(x) for x in value] if isinstance(value, list) else float(value)
@@ -194,6 +199,8 @@ class MpcParameters:
                 return SetParametersResult(successful=False, reason=str(exc))
         if any(n in new for n in LIVE_LIMITS):
             st.max_velocity = [float(new.get(n, self._p(n))) for n in LIVE_LIMITS]
+        if "max_command_norm" in new:
+            st.max_command_norm = float(new["max_command_norm"])
         if "stand_when_idle" in new:
             self.mpc.set_stand_when_idle(new["stand_when_idle"])
         # read by the node at every tick / command
