@@ -29,7 +29,7 @@ from horizon_mpc.motions import (
     run_turn,
     run_walk,
 )
-from horizon_mpc.motions.analysis import flight_phases, loaded, roll_pitch_yaw
+from horizon_mpc.motions.analysis import flight_phases, foot_heights, loaded, roll_pitch_yaw
 from horizon_mpc.motions.leap import leap_schedule
 from horizon_mpc.motions.schedule import (
     crawl_order,
@@ -38,7 +38,7 @@ from horizon_mpc.motions.schedule import (
     touchdown_nodes,
 )
 from horizon_mpc.motions.settings import MotionConfig
-from horizon_mpc.motions.turn import foot_heights, turn_schedule
+from horizon_mpc.motions.turn import turn_schedule
 from horizon_mpc.motions.wholebody import quaternion_error, robot_model
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -459,6 +459,23 @@ def test_walk_average_velocity_over_the_last_cycles_is_within_3_percent(walk):
     assert abs(res.v[1, -n - 1:-1].mean()) <= 0.02 * st.velocity[0]
 
 
+def test_the_walks_velocity_error_counts_the_linear_part_and_the_yaw_rate():
+    """An arc (0.2, 0, 0.4) walked without turning scored 0.03 before: only its linear
+    part was compared."""
+    from horizon_mpc.motions.walk import velocity_errors
+
+    ref = np.array([0.2, 0.0, 0.4])
+    assert velocity_errors(np.array([0.194, -0.003, 0.0]), ref)[0] == pytest.approx(1.0)
+    err, lin, yaw = velocity_errors(np.array([0.194, -0.003, 0.3946]), ref)
+    assert (lin, yaw) == (pytest.approx(np.hypot(0.006, 0.003) / 0.2),
+                          pytest.approx(0.0054 / 0.4))
+    assert err == max(lin, yaw)
+    assert velocity_errors(np.array([0.0, 0.0, 0.49]), np.array([0.0, 0.0, 0.5]))[1:] == (
+        None, pytest.approx(0.02))
+    assert velocity_errors(np.array([0.03, -0.04, 0.1]), np.zeros(3)) == (
+        pytest.approx(0.05), None, None)  # standing: the drift speed (m/s)
+
+
 @pytest.mark.slow
 def test_walk_turning_in_place_converges_its_first_horizon_and_tracks_the_yaw_rate(go2):
     """The first horizon of go2 turning in place takes 335 iterations (a cap of 50 had it
@@ -501,6 +518,10 @@ def test_walk_stance_feet_are_on_the_ground_and_push_only_while_down(walk):
     assert np.all(np.abs(z[res.stance]) <= 2e-3)
     lifting = res.stance[:, :-1] & ~res.stance[:, 1:]  # the interval a foot lifts off in
     assert np.all(np.abs(res.forces()[:, 2, :][lifting]) <= 1e-6)
+    # the summary's swing apexes are those of the swing nodes (a cost: below step_height)
+    lo, hi = res.summary["swing_apex"]
+    swing_z = z[~res.stance]
+    assert hi == pytest.approx(swing_z.max()) and 0.01 < lo <= hi < res.summary["step_height"]
 
 
 @pytest.mark.slow

@@ -7,11 +7,16 @@ model the optimiser used.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pinocchio as pin
 
 from horizon_mpc.closed_loop_report import roll_pitch_yaw
 from horizon_mpc.motions.result import MotionResult
+
+if TYPE_CHECKING:
+    from horizon_mpc.model import RobotModel
 
 __all__ = [
     "CONTACT_TOLERANCE",
@@ -21,6 +26,7 @@ __all__ = [
     "contact_torques",
     "dynamics_check",
     "flight_phases",
+    "foot_heights",
     "loaded",
     "roll_pitch_yaw",
     "swing_intervals",
@@ -169,6 +175,12 @@ def best_overlap(runs: list[tuple[int, int]], start: int, stop: int) -> tuple[in
     if max(overlap) > 0:
         return runs[int(np.argmax(overlap))]
     return max(runs, key=lambda ab: ab[1] - ab[0])
+
+
+def foot_heights(model: RobotModel, res: MotionResult) -> np.ndarray:
+    """Height (m) of each contact frame on each node, shape (n_feet, N+1)."""
+    n = res.q.shape[1]
+    return np.vstack([np.asarray(model.fk(foot).map(n)(res.q)[0])[2] for foot in res.feet])
 
 
 def swing_intervals(stance: np.ndarray) -> list[list[tuple[int, int]]]:

@@ -21,6 +21,7 @@ from horizon_mpc.motions.analysis import (
     check_contacts,
     contact_check,
     dynamics_check,
+    foot_heights,
     roll_pitch_yaw,
     swing_intervals,
 )
@@ -185,12 +186,6 @@ def turn_summary(res: MotionResult, tp: TurnProblem, model: RobotModel,
     out["max_base_wrench"] = dyn["max_base_wrench"]
     out.update(contact_check(res, model.pin_model))
     return out
-
-
-def foot_heights(model: RobotModel, res: MotionResult) -> np.ndarray:
-    """Height (m) of each contact frame on each node, shape (n_feet, N+1)."""
-    n = res.q.shape[1]
-    return np.vstack([np.asarray(model.fk(foot).map(n)(res.q)[0])[2] for foot in res.feet])
 
 
 def run_turn(robot: str | RobotConfig = "centauro", solver: str = "ipopt",

@@ -24,7 +24,7 @@ from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings, WalkingProblem, build_walking_problem, make_gait
 from horizon_mpc.locomotion.pose_reference import advance_pose, base_yaw, horizon_poses
 from horizon_mpc.model import RobotModel
-from horizon_mpc.motions.analysis import dynamics_check
+from horizon_mpc.motions.analysis import dynamics_check, foot_heights, swing_intervals
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import touchdown_nodes
 from horizon_mpc.motions.settings import check_settings
@@ -186,7 +186,7 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
     res.arrays.update(v_ref=np.array([cmd[0], cmd[1], 0.0, 0.0, 0.0, cmd[2]]),
                       tick_time=np.array(tick_time), iterations=np.array(iterations),
                       violation=np.array(violation))
-    res.summary = walk_summary(res, gait.period, st, model)
+    res.summary = walk_summary(res, gait.period, st, model, mpc.gait.step_height)
     # success: the first horizon converged and the motion executed is consistent (its
     # Euler steps and the dynamics hold: the motion a perfect model would follow); a tick
     # may end unconverged (real-time iterations), but not a motion that breaks the physics
@@ -232,15 +232,32 @@ def _percentiles(x: np.ndarray) -> dict[str, float]:
             "tick_ms_max": float(np.max(x) * 1e3)}
 
 
+def velocity_errors(mean: np.ndarray, ref: np.ndarray) -> tuple[float, float | None,
+                                                                 float | None]:
+    """``(velocity_error, linear part, yaw-rate part)`` of a mean base-frame velocity
+    ``(vx, vy, wz)`` against its reference (see :func:`walk_summary`)."""
+    lin_ref = float(np.linalg.norm(ref[:2]))
+    lin_err = float(np.linalg.norm(mean[:2] - ref[:2]) / lin_ref) if lin_ref > 0 else None
+    yaw_err = float(abs(mean[2] - ref[2]) / abs(ref[2])) if ref[2] != 0 else None
+    parts = [e for e in (lin_err, yaw_err) if e is not None]
+    return (max(parts) if parts else float(np.linalg.norm(mean[:2]))), lin_err, yaw_err
+
+
 def walk_summary(res: MotionResult, period: float, st: WalkSettings,
-                 model: RobotModel) -> dict:
+                 model: RobotModel, step_height: float = math.nan) -> dict:
     """Velocity over the last ``average_cycles`` gait cycles and force periodicity.
 
     ``mean_velocity``: mean base-frame ``(vx, vy, wz)`` over the window;
-    ``velocity_error``: ``|mean - reference| / |reference|`` of the linear part, or of the
-    yaw rate when the linear reference is zero (turning in place), or the mean linear speed
-    (m/s) when the reference is zero;
-    ``force_periodicity``: ``||f(last cycle) - f(cycle before)|| / ||f(last cycle)||``.
+    ``velocity_error``: the larger of ``|mean - reference| / |reference|`` of the linear
+    part and of the yaw rate (each where its reference is not zero), or the mean linear
+    speed (m/s) when the whole reference is zero; ``linear_velocity_error`` and
+    ``yaw_rate_error``: the two parts (None where that reference is zero);
+    ``distance``: the base's net displacement in the plane (m), ``path_length`` the length
+    of its path;
+    ``force_periodicity``: ``||f(last cycle) - f(cycle before)|| / ||f(last cycle)||``;
+    ``swing_apex``: ``[lowest, highest]`` apex over the planned swings (m above the foot's
+    standing height), beside the gait's ``step_height`` (the clearance is a cost: an apex
+    below it is the compromise the weights made).
     """
     n_cycle = int(round(period / res.dt))
     n_win = min(st.average_cycles * n_cycle, res.n_nodes)
@@ -251,20 +268,22 @@ def walk_summary(res: MotionResult, period: float, st: WalkSettings,
     v = res.v[:, -n_win - 1:-1]
     mean = np.array([v[0].mean(), v[1].mean(), v[5].mean()])
     ref = np.asarray(st.velocity, float)
-    lin_ref = np.linalg.norm(ref[:2])
-    if lin_ref > 0:
-        err = float(np.linalg.norm(mean[:2] - ref[:2]) / lin_ref)
-    elif ref[2] != 0:
-        err = float(abs(mean[2] - ref[2]) / abs(ref[2]))
-    else:
-        err = float(np.linalg.norm(mean[:2]))
+    err, lin_err, yaw_err = velocity_errors(mean, ref)
     out = {"velocity_reference": ref.tolist(), "mean_velocity": mean.tolist(),
-           "velocity_error": err, "window": [float(res.t[-n_win - 1]), float(res.t[-1])],
-           "gait_period": period, "distance": float(np.linalg.norm(res.q[:2, -1]
-                                                                   - res.q[:2, 0]))}
+           "velocity_error": err, "linear_velocity_error": lin_err, "yaw_rate_error": yaw_err,
+           "window": [float(res.t[-n_win - 1]), float(res.t[-1])],
+           "gait_period": period,
+           "distance": float(np.linalg.norm(res.q[:2, -1] - res.q[:2, 0])),  # net, start to end
+           "path_length": float(np.sum(np.linalg.norm(np.diff(res.q[:2], axis=1), axis=0)))}
     if res.n_nodes >= 2 * n_cycle:
         last, prev = res.f[:, -n_cycle:], res.f[:, -2 * n_cycle:-n_cycle]
         out["force_periodicity"] = float(np.linalg.norm(last - prev) / np.linalg.norm(last))
+    z = foot_heights(model, res)
+    z = z - z[:, :1]  # above the standing height (the walk starts standing)
+    apexes = [float(z[i, a:b].max()) for i, runs in enumerate(swing_intervals(res.stance))
+              for a, b in runs if b > a]
+    out["swing_apex"] = [min(apexes), max(apexes)] if apexes else None
+    out["step_height"] = float(step_height)
     dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
     out["max_dynamics_defect"] = dyn["max_defect"]
     out["max_base_wrench"] = dyn["max_base_wrench"]
