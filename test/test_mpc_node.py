@@ -23,7 +23,7 @@ from pathlib import Path as FilePath
 import numpy as np
 import pytest
 import rclpy
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Twist
 from hypothesis import given
 from hypothesis import strategies as st
@@ -463,6 +463,25 @@ def test_a_stale_state_is_not_planned_from(harness):
     h.spin_until(lambda: h.node.stale_skips > 0)
     h.spin_for(0.2)
     assert h.trajectories == [] and h.node.plan is None
+
+
+def test_states_that_stop_arriving_are_reported_stale(harness):
+    """Timer trigger: when the states stop, the node publishes nothing new and, once the
+    last state is older than state_timeout, counts stale skips and sends a WARN status (it
+    went silent, its last status OK, before)."""
+    h = harness(trigger="timer", control_rate=50.0, state_timeout=0.1, diagnostics_rate=0.0)
+    statuses: list = []
+    h.probe.create_subscription(DiagnosticArray, "/diagnostics",
+                                lambda m: statuses.append(m.status[0]), 10)
+    h.publish_state()
+    h.spin_until(lambda: h.trajectories)
+    n = len(h.trajectories)
+    h.spin_until(lambda: h.node.stale_skips > 0 and statuses
+                 and statuses[-1].level == DiagnosticStatus.WARN, timeout=5.0)
+    assert len(h.trajectories) == n  # nothing new planned
+    assert "stale state" in statuses[-1].message and h.node.last_state_age > 0.1
+    h.publish_state()  # states again: planning again
+    h.spin_until(lambda: len(h.trajectories) > n)
 
 
 def test_a_state_stamped_in_the_future_is_not_planned_from(harness):

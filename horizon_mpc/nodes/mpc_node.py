@@ -326,10 +326,20 @@ class MpcNode(MpcParameters, Node):
             return False
         joints, base = self._state_pair()
         stamp_ns = min(joints[0], base[0])
+        now_ns = self.get_clock().now().nanoseconds
         if stamp_ns == self._last_tick_stamp:
+            # no new state since the last plan: nothing to do, unless the states stopped
+            # (a timer tick): then say so, as for a stale state that arrives
+            age = (now_ns - stamp_ns) / NS_PER_S
+            if age > self.state_timeout:
+                self.last_state_age = age
+                self.stale_skips += 1
+                self._warn("stale", f"no new state for {age:.3f} s (state_timeout "
+                           f"{self.state_timeout:g} s): not planning; the last trajectory "
+                           "sent is the robot's last plan")
+                self._publish_diagnostics(None, stamp_ns, now_ns)
             return False
         t = stamp_ns / NS_PER_S
-        now_ns = self.get_clock().now().nanoseconds
         if self._last_tick_stamp is not None and stamp_ns < self._last_tick_stamp \
                 and now_ns >= self._last_tick_stamp:
             # out of order (the node's clock did not go back, as at a simulator reset)
