@@ -26,8 +26,8 @@ def generate_launch_description() -> LaunchDescription:
     robot = {name: LaunchConfiguration(name) for name in ARGUMENTS}
     return LaunchDescription([
         *args,
-        Node(package="horizon_mpc", executable="sim_node", name="sim_node",
+        Node(package="horizon_mpc", executable="sim_node", name="sim",
              parameters=[robot], output="screen"),
-        Node(package="horizon_mpc", executable="mpc_node", name="mpc_node",
+        Node(package="horizon_mpc", executable="mpc_node", name="mpc",
              parameters=[{**robot, "use_sim_time": True}], output="screen"),
     ])
