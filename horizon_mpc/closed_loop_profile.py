@@ -141,7 +141,8 @@ def load_profile(path: str | Path) -> list[Segment]:
             raise ValueError(f"{where} must be a mapping {{duration, vx, vy, wz}}, got {item!r}")
         unknown = set(item) - {"duration", "vx", "vy", "wz"}
         if unknown or "duration" not in item:
-            raise ValueError(f"{where} needs 'duration' and only vx/vy/wz, got {sorted(item)}")
+            raise ValueError(f"{where} needs 'duration' and only vx/vy/wz, got "
+                             f"{sorted(map(str, item))}")
         seg = Segment(**{k: _number(v, f"{where}: {k}") for k, v in item.items()})
         if not seg.duration > 0:
             raise ValueError(f"{where} has non-positive duration {seg.duration}")

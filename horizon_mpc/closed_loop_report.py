@@ -103,6 +103,8 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
                  "samples": int(mask.sum())}
         if end > run_end + 0.05:  # --duration ended the run before this segment's end
             entry.update(end=max(start, run_end), planned_end=end, cut_short=True)
+            if start >= run_end:  # never played: no end of its own
+                entry.update(end=None, reached=False)
         if rec.max_velocity is not None:
             clamped = np.array(limit_command(cmd, rec.max_velocity, rec.max_command_norm))
             if not np.array_equal(clamped, cmd):

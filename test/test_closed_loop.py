@@ -75,7 +75,8 @@ def test_a_bad_profile_names_the_problem(tmp_path):
     ("- 1.0\n", "segment 0 must be a mapping"),                       # a raw TypeError
     ("segmnts:\n  - {duration: 1.0}\n", r"unknown key\(s\) \['segmnts'\]"),
     ("segments: [{duration: 1.0\n", "not valid YAML"),
-], ids=["inf", "nan", "absurd", "string", "bool", "scalar", "typo", "yaml"])
+    ("- {duration: 2, vx: 0.2, 1: 3}\n", r"only vx/vy/wz, got \['1', 'duration', 'vx'\]"),
+], ids=["inf", "nan", "absurd", "string", "bool", "scalar", "typo", "yaml", "int_key"])
 def test_profile_segments_that_cannot_run_are_refused(tmp_path, text, match):
     path = tmp_path / "p.yaml"
     path.write_text(text)
@@ -171,6 +172,10 @@ def test_a_segment_the_duration_cut_short_says_so():
     assert segs[1]["cut_short"] and segs[1]["planned_end"] == 5.0
     assert segs[1]["end"] == pytest.approx(1.98)
     assert segs[2]["cut_short"] and segs[2]["samples"] == 0 and "mean" not in segs[2]
+    # never reached (it starts at 5.0 s, the run ended at 2 s): no end of its own (its end
+    # was its start, 5.0, a time the run never saw)
+    assert segs[2]["end"] is None and segs[2]["reached"] is False
+    assert "reached" not in segs[1] and segs[2]["planned_end"] == 6.0
 
 
 def test_the_mpc_parameter_names_are_the_nodes(walking_mpc_node_parameters):
