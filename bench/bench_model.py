@@ -22,6 +22,7 @@ Run: ``python bench/bench_model.py``; writes ``bench/results/model.json``.
 
 from __future__ import annotations
 
+import argparse
 import json
 import logging
 import platform
@@ -205,4 +206,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    # no options: --help shows this docstring, anything else is refused (it ran the
+    # benchmark and overwrote its results)
+    argparse.ArgumentParser(description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()

@@ -18,6 +18,7 @@ these machines vary 20-50% between runs: compare ratios within one run). Run:
 
 from __future__ import annotations
 
+import argparse
 import json
 import platform
 import statistics
@@ -243,4 +244,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    # no options: --help shows this docstring, anything else is refused (it ran the
+    # benchmark and overwrote its results)
+    argparse.ArgumentParser(description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()

@@ -17,6 +17,7 @@ other jobs share the cores: compare ratios). Run:
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -183,4 +184,8 @@ def main() -> dict:
 
 
 if __name__ == "__main__":
+    # no options: --help shows this docstring, anything else is refused (it ran the
+    # benchmark and overwrote its results)
+    argparse.ArgumentParser(description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()
