@@ -324,3 +324,110 @@ def test_a_command_is_limited_per_axis_then_to_the_combined_norm():
     np.testing.assert_allclose(out / np.array(lims), np.array([1, 1, -1]) / math.sqrt(3))
     assert limit_command([0.6, -0.5, -0.8], lims, max_norm=2.0) == (0.6, -0.5, -0.8)
     assert limit_command([0.4, 0.2, 0.3], [0.0, 0.5, 0.8]) == (0.0, 0.2, 0.3)  # a zero limit
+
+
+def test_a_new_step_duration_while_trotting_keeps_the_cycles_phase():
+    """Swapping the gait under a running phase put feet 5 cm up into stance and lifted the
+    standing pair (go2 fell 0.2 s after step_duration 0.3 -> 0.5)."""
+    sch = GaitScheduler(make_gait("trot", step_duration=0.3))
+    sch.command(0.0, moving=True)
+    before = sch.schedule(1.13, 0, 0.02)
+    sch.set_gait(make_gait("trot", step_duration=0.5), 1.13)
+    after = sch.schedule(1.13, 0, 0.02)
+    np.testing.assert_array_equal(after.stance, before.stance)
+    np.testing.assert_allclose(after.swing_progress, before.swing_progress, atol=1e-12)
+    assert sch.gait.step_duration == 0.5 and sch.pending is None
+
+
+def test_another_gait_while_walking_starts_once_the_swings_in_progress_end():
+    sch = GaitScheduler(make_gait("trot", step_duration=0.3))
+    sch.command(0.0, moving=True)
+    t = 1.13
+    swinging = ~sch.schedule(t, 0, 0.02).stance[:, 0]
+    assert swinging.any()
+    sch.set_gait(make_gait("walk", step_duration=0.3), t)  # duty 0.75: the walk's own
+    assert sch.gait.name == "trot" and sch.pending.duty_factor == 0.75
+    s = sch.schedule(t, 30, 0.02)
+    np.testing.assert_array_equal(~s.stance[:, 0], swinging)  # nothing jumps
+    assert s.stance[:, 0.02 * np.arange(31) > 0.3 + 1e-9].all()  # then the feet stay down
+    sch.command(t + 0.1, moving=True)
+    assert sch.gait.name == "trot"  # still ending its swings
+    sch.command(t + 0.31, moving=True)
+    assert sch.gait.name == "walk" and sch.pending is None and sch.t_start == t + 0.31
+
+
+def test_the_stand_gait_keeps_the_feet_down_and_leaves_no_walk_behind():
+    """stand -> trot with a zero command lifted two feet at once (the stand gait had
+    started a 'walk' in the scheduler)."""
+    sch = GaitScheduler(make_gait("stand"))
+    sch.command(0.5, moving=True)
+    assert sch.schedule(0.5, 10, 0.02).stance.all() and not sch.walking
+    sch.set_gait(make_gait("trot"), 0.6)
+    sch.command(0.6, moving=False)
+    assert sch.schedule(0.6, 10, 0.02).stance.all()
+
+
+def test_gait_values_out_of_range_are_refused():
+    for kwargs, match in (({"step_duration": float("nan")}, "step_duration"),
+                          ({"step_height": -0.05}, "step_height"),
+                          ({"step_height": float("inf")}, "step_height"),
+                          ({"duty_factor": 1.5}, "duty factor")):
+        with pytest.raises(ValueError, match=match):
+            make_gait("trot", **kwargs)
+    assert make_gait("walk").duty_factor == 0.75  # the gait's own by default
+
+
+def test_set_gait_checks_before_it_changes_anything(walking_mpc):
+    """A refused duty factor 1.5 stayed in the settings and made every later set_gait
+    fail; step_duration 0 was ignored (falsy)."""
+    g = walking_mpc.settings.gait
+    before = (g.name, g.step_duration, g.duty_factor, g.step_height)
+    for kwargs in ({"duty_factor": 1.5}, {"step_duration": 0.0}, {"step_height": -0.05}):
+        with pytest.raises(ValueError):
+            walking_mpc.set_gait("trot", **kwargs)
+        assert (g.name, g.step_duration, g.duty_factor, g.step_height) == before
+    with pytest.raises(ValueError, match="unknown gait"):
+        walking_mpc.set_gait("foo")
+    assert walking_mpc.scheduler.gait.name == g.name == before[0]
+    walking_mpc.set_gait("walk")
+    assert walking_mpc.scheduler.gait.duty_factor == 0.75 and g.duty_factor is None
+    walking_mpc.set_gait(*before[:2], step_height=before[3], duty_factor=before[2])
+
+
+def test_a_bad_state_is_refused_before_the_controller_changes(walking_mpc):
+    """One state with an infinite joint (or a command of the wrong length) raised from deep
+    inside after the pose reference had moved: it stayed NaN and the go2 never walked
+    again; now it is refused first, and the next good state is planned from normally."""
+    from horizon_mpc.posture import standing_configuration
+
+    _, q = standing_configuration(walking_mpc.cfg)
+    v = np.zeros(walking_mpc.model.nv)
+    walking_mpc.start(q, v, 0.0)
+    pose = walking_mpc.pose_ref.copy()
+    bad_q = q.copy()
+    bad_q[8] = np.inf
+    for args, match in (((0.02, bad_q, v), r"not finite at q\[8\]"),
+                        ((float("nan"), q, v), "time must be finite"),
+                        ((0.02, q[:-1], v), "shapes"),
+                        ((0.02, q, v, [0.1, 0.0]), "3 numbers")):
+        with pytest.raises(ValueError, match=match):
+            walking_mpc.update(*args)
+        np.testing.assert_array_equal(walking_mpc.pose_ref, pose)
+    plan = walking_mpc.update(0.02, q, v, np.array([0.2, 0.0, 0.0]))
+    assert np.isfinite(plan.q).all() and walking_mpc.failures == 0
+    np.testing.assert_allclose(walking_mpc.pose_ref[:2], pose[:2], atol=0.01)
+
+
+def test_the_stand_gait_does_not_walk_a_command(walking_mpc):
+    """With gait stand the base moved 13 cm and yawed 34 deg on planted feet."""
+    from horizon_mpc.posture import standing_configuration
+
+    _, q = standing_configuration(walking_mpc.cfg)
+    walking_mpc.start(q, np.zeros(walking_mpc.model.nv), 0.0)
+    walking_mpc.set_gait("stand")
+    try:
+        for k in range(1, 6):
+            walking_mpc.update(0.02 * k, q, np.zeros(walking_mpc.model.nv), [0.3, 0.0, 0.5])
+        assert np.all(walking_mpc.cmd == 0.0)
+    finally:
+        walking_mpc.set_gait("trot", duty_factor=None)

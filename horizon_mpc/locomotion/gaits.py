@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["GAITS", "ContactSchedule", "Gait", "make_gait", "swing_height_profile"]
+__all__ = ["EXPERIMENTAL_GAITS", "GAITS", "ContactSchedule", "Gait", "make_gait",
+           "swing_height_profile"]
 
 
 @dataclass(frozen=True)
@@ -86,12 +87,23 @@ GAITS: dict[str, tuple[tuple[float, ...], float]] = {
 }
 
 
+#: gaits the walking MPC offers but which do not walk (session 20, lockstep closed loop, 0.25
+#: m/s forward): what was seen, for the warnings of the node and the docs
+EXPERIMENTAL_GAITS: dict[str, str] = {
+    "pace": "go2 and a1 fell at 1.2 s, anymal_c at 3.0 s (solo12 paced)",
+    "bound": "go2, a1, solo12 and anymal_c fell within 0.4 s",
+    "pronk": "go2 fell at 1.6 s, solo12 at 3.5 s (anymal_c pronked)",
+}
+
+
 def make_gait(name: str, step_duration: float = 0.3, step_height: float = 0.08,
               duty_factor: float | None = None, n_feet: int = 4) -> Gait:
-    """A gait from the library (``stand``, ``trot``, ``walk``, ``pace``, ``bound``, ``pronk``).
+    """A gait from the library (``stand``, ``trot``, ``walk``, ``pace``, ``bound``, ``pronk``);
+    ``duty_factor`` None: the gait's own (:data:`GAITS`: walk 0.75, the others 0.5).
 
     Raises:
-        ValueError: unknown name, non-positive duration, duty factor outside (0, 1].
+        ValueError: unknown name, a duration that is not a finite number > 0, a step height
+            that is not a finite number >= 0, a duty factor outside (0, 1].
     """
     if name not in GAITS:
         raise ValueError(f"unknown gait {name!r}; gaits are: {', '.join(GAITS)}")
@@ -99,8 +111,10 @@ def make_gait(name: str, step_duration: float = 0.3, step_height: float = 0.08,
     beta = beta if duty_factor is None or name == "stand" else float(duty_factor)
     if not 0.0 < beta <= 1.0:
         raise ValueError(f"duty factor must be in (0, 1], got {beta}")
-    if step_duration <= 0:
-        raise ValueError(f"step_duration must be > 0, got {step_duration}")
+    if not (np.isfinite(step_duration) and step_duration > 0):
+        raise ValueError(f"step_duration must be a finite number > 0, got {step_duration}")
+    if not (np.isfinite(step_height) and step_height >= 0):
+        raise ValueError(f"step_height must be a finite number >= 0, got {step_height}")
     if n_feet != 4:
         offsets = tuple(offsets[i % 4] for i in range(n_feet))
     return Gait(name, tuple(offsets), beta, float(step_duration), float(step_height))

@@ -22,15 +22,19 @@ class GaitSettings:
 
     name: str = "trot"
     step_duration: float = 0.3
-    duty_factor: float = 0.5
+    # stance fraction of a cycle; None: the gait's own (gaits.GAITS: walk 0.75, the others
+    # 0.5; a fixed 0.5 made the 'walk' gait a two-foot gait)
+    duty_factor: float | None = None
     step_height: float = 0.07
 
     def __post_init__(self) -> None:
         check_settings(self, positive=("step_duration",), non_negative=("step_height",),
                        prefix="mpc.gait.")
-        if not (isinstance(self.duty_factor, (int, float)) and 0 < self.duty_factor <= 1):
-            raise ValueError(f"'mpc.gait.duty_factor' must be in (0, 1], got "
-                             f"{self.duty_factor!r}")
+        if self.duty_factor is not None and not (
+                isinstance(self.duty_factor, (int, float)) and not isinstance(
+                    self.duty_factor, bool) and 0 < self.duty_factor <= 1):
+            raise ValueError(f"'mpc.gait.duty_factor' must be in (0, 1] (or null: the gait's "
+                             f"own), got {self.duty_factor!r}")
 
 
 @dataclass

@@ -146,9 +146,14 @@ class WalkingMpc:
     # ------------------------------------------------------------------ set-up
     def start(self, q: np.ndarray, v: np.ndarray, t: float = 0.0,
               max_iter: int = 50) -> Plan:
-        """Bootstrap: solve the standing problem at the measured state to convergence."""
+        """Bootstrap: solve the standing problem at the measured state to convergence.
+
+        Raises:
+            ValueError: a state of the wrong shape or not finite, or a time not finite
+                (nothing changed).
+        """
         wp = self.wp
-        q = self._clean_q(q)
+        q, v = self._checked_state(t, q, v)
         fk = [self.model.fk(foot) for foot in wp.feet]
         self.ground_z = np.array([float(fn(q)[0][2]) for fn in fk])
         # feet frames may sit above the ground (foot radius): keep the height above them
@@ -198,7 +203,14 @@ class WalkingMpc:
         After :meth:`prepare` for a time within ``settings.max_extrapolation`` of ``t``,
         the tick is only the feedback step of the prepared iteration (``cmd`` was taken at
         the preparation); otherwise it is the whole tick.
+
+        Raises:
+            ValueError: a state of the wrong shape or not finite, a time not finite, a
+                command that is not 3 numbers (checked before anything changes: a state with
+                an infinite quaternion left the pose reference NaN for good).
         """
+        q, v = self._checked_state(t, q, v)
+        cmd = self._checked_command(cmd)
         if self.t_last is None:
             return self.start(q, v, t)
         jump = self._discontinuity(t, q)
@@ -212,7 +224,6 @@ class WalkingMpc:
             plan = self._feedback(t, q, v)
             if plan is not None:
                 return plan
-        q = self._clean_q(q)
         dt_tick = max(t - self.t_last, 0.0)
         self._ramp_command(cmd, dt_tick)
         self._shift(dt_tick, q)
@@ -245,6 +256,9 @@ class WalkingMpc:
         """
         if self.t_last is None:
             raise RuntimeError("prepare() needs a started controller (start() or update())")
+        if not math.isfinite(t_next):
+            raise ValueError(f"prepare(): the tick time must be finite, got {t_next}")
+        cmd = self._checked_command(cmd)
         dt_tick = max(t_next - self.t_last, 0.0)
         self._ramp_command(cmd, dt_tick)
         self._shift(dt_tick, self.wp.q.initial_guess[:, 0])
@@ -267,17 +281,14 @@ class WalkingMpc:
         return ok
 
     def _feedback(self, t: float, q: np.ndarray, v: np.ndarray) -> Plan | None:
-        """The feedback phase of the prepared iteration from the state measured at ``t``;
-        None when ``t`` is too far from the prepared time (the caller runs a whole tick)."""
+        """The feedback phase of the prepared iteration from the state measured at ``t``
+        (checked: :meth:`_checked_state`); None when ``t`` is too far from the prepared time
+        (the caller runs a whole tick)."""
         t_plan, self._prepared_for = self._prepared_for, None
         lead = t_plan - t
         if abs(lead) > self.settings.max_extrapolation or not self.solver.prepared:
             self.prepare_misses += 1
             return None
-        q = self._clean_q(q)
-        v = np.asarray(v, dtype=float)
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
-            return None  # the whole tick's failure handling applies
         if abs(lead) > 1e-9:
             # the state predicted to the prepared time (constant velocity)
             q = pin.integrate(self.model.pin_model, q, v * lead)
@@ -356,11 +367,43 @@ class WalkingMpc:
     # ------------------------------------------------------------------ pieces
     @staticmethod
     def _clean_q(q: np.ndarray) -> np.ndarray:
-        """A copy of ``q`` with a unit base quaternion (identity if it has no direction)."""
+        """A copy of ``q`` with a unit base quaternion (identity if it has no direction: a
+        zero, NaN or infinite one)."""
         q = np.array(q, dtype=float)
         n = math.hypot(*q[3:7].tolist())  # four numbers: no numpy call (every tick)
-        q[3:7] = q[3:7] / n if n > 1e-9 else (0.0, 0.0, 0.0, 1.0)
+        q[3:7] = q[3:7] / n if 1e-9 < n < math.inf else (0.0, 0.0, 0.0, 1.0)
         return q
+
+    def _checked_state(self, t: float, q: np.ndarray, v: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, v)`` as clean float arrays (:meth:`_clean_q`), or ValueError naming what is
+        wrong: a time or a state entry not finite, a state of the wrong shape."""
+        if not math.isfinite(t):
+            raise ValueError(f"the state's time must be finite, got {t}")
+        q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
+        nq, nv = self.model.nq, self.model.nv
+        if q.shape != (nq,) or v.shape != (nv,):
+            raise ValueError(f"state of shapes q {q.shape}, v {v.shape}; the model has q "
+                             f"({nq},), v ({nv},)")
+        q = self._clean_q(q)
+        if not (np.isfinite(q).all() and np.isfinite(v).all()):
+            bad = [f"{n}[{i}]" for n, x in (("q", q), ("v", v))
+                   for i in np.flatnonzero(~np.isfinite(x))]
+            raise ValueError(f"state not finite at {', '.join(bad[:6])}: not planned from")
+        return q, v
+
+    @staticmethod
+    def _checked_command(cmd: np.ndarray | None) -> np.ndarray | None:
+        """``cmd`` as 3 floats (NaN/inf entries are zeroed later), or ValueError."""
+        if cmd is None:
+            return None
+        try:
+            arr = np.asarray(cmd, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"command must be 3 numbers (vx, vy, wz), got {cmd!r}") from None
+        if arr.shape != (3,):
+            raise ValueError(f"command must be 3 numbers (vx, vy, wz), got shape {arr.shape}")
+        return arr
 
     def _set_state(self, q: np.ndarray, v: np.ndarray) -> None:
         self.wp.q.set_bounds(q, q, nodes=0)
@@ -401,6 +444,10 @@ class WalkingMpc:
         # three numbers: plain floats (numpy's per-call overhead was ~50 us a tick here)
         target = limit_command([c if math.isfinite(c) else 0.0 for c in cmd],
                                st.max_velocity, st.max_command_norm)
+        if self.scheduler.gait.duty_factor >= 1.0:
+            # a gait that never lifts a foot (stand): the command cannot be walked; moving
+            # the base on planted feet slid them (34 deg of yaw, feet dragged 2 cm)
+            target = (0.0, 0.0, 0.0)
         for i, (c, amax) in enumerate(zip(target, st.max_acceleration, strict=True)):
             step = amax * dt
             self.cmd[i] += min(max(c - self.cmd[i], -step), step)
@@ -439,15 +486,22 @@ class WalkingMpc:
     # ------------------------------------------------------------------ live settings
     def set_gait(self, name: str, step_duration: float | None = None,
                  step_height: float | None = None, duty_factor: float | None = None) -> None:
-        """Switch gait (takes effect at the next tick)."""
+        """Switch gait (from the next tick): ``step_duration`` and ``step_height`` None keep
+        the current ones, ``duty_factor`` None is the gait's own (walk 0.75, the others
+        0.5). Checked before anything changes. While walking the contacts do not jump: a new
+        step duration or height keeps the cycle's phase, another gait or duty factor starts
+        once the swings in progress have ended (:meth:`GaitScheduler.set_gait`).
+
+        Raises:
+            ValueError: an unknown gait or a value out of its range (nothing changed).
+        """
         g = self.settings.gait
-        g.name = name
-        g.step_duration = step_duration or g.step_duration
-        g.step_height = step_height if step_height is not None else g.step_height
-        g.duty_factor = duty_factor if duty_factor is not None else g.duty_factor
-        self.scheduler.gait = make_gait(g.name, g.step_duration, g.step_height,
-                                        None if name in ("stand",) else g.duty_factor,
-                                        len(self.wp.feet))
+        step_duration = g.step_duration if step_duration is None else float(step_duration)
+        step_height = g.step_height if step_height is None else float(step_height)
+        gait = make_gait(name, step_duration, step_height, duty_factor, len(self.wp.feet))
+        g.name, g.step_duration, g.step_height = name, step_duration, step_height
+        g.duty_factor = None if duty_factor is None else float(duty_factor)
+        self.scheduler.set_gait(gait, self.t_last if self.t_last is not None else 0.0)
 
     def set_stand_when_idle(self, stand: bool) -> None:
         """With a zero command, keep the feet down (True) or keep the gait stepping in place

@@ -3,6 +3,12 @@
 Walking starts when a non-zero command arrives; when the command returns to zero, every
 swing that has begun is finished and the feet then stay down (``stand_when_idle``).
 Times are absolute (s); the gait's phase is counted from the moment walking started.
+
+A new gait while walking (:meth:`GaitScheduler.set_gait`) never makes the contacts jump: a
+new step duration or height keeps the cycle's phase (same feet in the air, at the same
+fraction of their swing); another gait or duty factor is taken once the swings in progress
+have ended (a stop), and walking resumes with it. Swapping the gait under a running phase
+put feet that were 5 cm up into stance and lifted the standing ones (go2 fell).
 """
 
 from __future__ import annotations
@@ -20,12 +26,37 @@ class GaitScheduler:
     def __init__(self, gait: Gait, stand_when_idle: bool = True):
         self.gait = gait
         self.stand_when_idle = stand_when_idle
+        self.pending: Gait | None = None  # the gait to take once the current swings end
         self.reset(0.0)
 
     def reset(self, t: float) -> None:
-        """Standing, no walk in progress."""
-        self.t_start: float | None = None if self.stand_when_idle else t
+        """Standing, no walk in progress (a pending gait is taken now)."""
+        if self.pending is not None:
+            self.gait, self.pending = self.pending, None
+        self.t_start: float | None = (None if self.stand_when_idle or self.gait.name == "stand"
+                                      else t)
         self.t_stop: float | None = None
+
+    def set_gait(self, gait: Gait, t: float) -> None:
+        """Walk with ``gait`` from time ``t`` on, without a jump of the contacts (see the
+        module docstring)."""
+        old = self.gait if self.pending is None else self.pending
+        walking = self.t_start is not None and self.gait.name != "stand"
+        if not walking or gait.name == "stand":
+            self.gait, self.pending = gait, None
+            if gait.name == "stand":
+                self.t_start = self.t_stop = None
+            return
+        if self.pending is None and (gait.offsets, gait.duty_factor) == (
+                old.offsets, old.duty_factor):
+            # the same pattern at another pace: keep the phase of the cycle
+            phase = ((t - self.t_start) / old.period) % 1.0
+            self.t_start = t - phase * gait.period
+            self.gait = gait
+            return
+        self.pending = gait
+        if self.t_stop is None:
+            self.t_stop = t
 
     @property
     def walking(self) -> bool:
@@ -34,7 +65,14 @@ class GaitScheduler:
 
     def command(self, t: float, moving: bool) -> None:
         """Tell the scheduler whether the robot is commanded to move at time ``t``."""
-        if not self.stand_when_idle or self.gait.name == "stand":
+        if self.pending is not None:
+            if self.t_start is not None and t - self.t_stop <= self.gait.step_duration + 1e-9:
+                return  # the old gait's swings are ending
+            self.gait, self.pending = self.pending, None
+            self.t_start = self.t_stop = None
+        if self.gait.name == "stand":
+            return
+        if not self.stand_when_idle:
             if self.t_start is None:
                 self.t_start = t
             return

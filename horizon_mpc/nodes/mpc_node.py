@@ -54,6 +54,7 @@ from horizon_mpc.nodes.mpc_parameters import (
     LIVE_LIMITS,
     MODEL_PARAMETER_DECLARATIONS,
     MpcParameters,
+    gait_warnings,
     parameter_table,
     timing_warnings,
 )
@@ -96,7 +97,7 @@ class MpcNode(MpcParameters, Node):
         settings.n_nodes, settings.dt = horizon
         g = settings.gait
         g.name, g.step_duration = self._p("gait"), self._p("step_duration")
-        g.step_height, g.duty_factor = self._p("step_height"), self._p("duty_factor")
+        g.step_height, g.duty_factor = self._p("step_height"), self._p("duty_factor") or None
         settings.max_velocity = [self._p(n) for n in LIVE_LIMITS]
         settings.max_command_norm = float(self._p("max_command_norm"))
         settings.stand_when_idle = bool(self._p("stand_when_idle"))
@@ -104,6 +105,8 @@ class MpcNode(MpcParameters, Node):
         settings.max_extrapolation = float(self._p("max_extrapolation"))
         settings.weights = self._weights_from_parameters(settings.weights)
 
+        for note in gait_warnings(g.name):
+            self.get_logger().warning(note)
         for note in timing_warnings(settings.dt, settings.n_nodes,
                                     1.0 / self._p("control_rate"),
                                     min(self._p("publish_points"), settings.n_nodes),
@@ -283,6 +286,9 @@ class MpcNode(MpcParameters, Node):
             self.rejected["cmd_vel"] += 1
             self._warn("cmd_vel", f"rejected cmd_vel: {exc}; keeping the previous command")
             return
+        if self.mpc.scheduler.gait.duty_factor >= 1.0 and np.any(cmd != 0.0):
+            notes.append(f"gait {self.mpc.settings.gait.name!r} never lifts a foot: cmd_vel "
+                         "is not followed (the robot stands)")
         for note in notes:
             self._warn(_note_kind("cmd_vel", note), note)
         self._cmd = (self.now(), cmd)

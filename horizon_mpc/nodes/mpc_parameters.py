@@ -20,13 +20,13 @@ from rcl_interfaces.msg import (
 from rclpy.parameter import Parameter
 
 from horizon_mpc.locomotion import MpcSettings
-from horizon_mpc.locomotion.gaits import GAITS
+from horizon_mpc.locomotion.gaits import EXPERIMENTAL_GAITS, GAITS
 from horizon_mpc.locomotion.settings import Weights
 from horizon_mpc.nodes.declare import declare, float_range, int_range
 
 __all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MODEL_PARAMETERS",
-           "MODEL_PARAMETER_DECLARATIONS", "WEIGHT_FIELDS", "MpcParameters", "parameter_names",
-           "parameter_table", "timing_warnings"]
+           "MODEL_PARAMETER_DECLARATIONS", "WEIGHT_FIELDS", "MpcParameters", "gait_warnings",
+           "parameter_names", "parameter_table", "timing_warnings"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
@@ -52,6 +52,16 @@ DIAGNOSTICS_RATE = 10.0
 WALKED_DT = (0.01, 0.035)  # s; 0.04 fell
 WALKED_MIN_NODES = 16  # 16, 20, 24 walked; 12 fell
 WALKED_MAX_NODES_PER_TICK = 5  # 10 Hz at dt 0.02 walked; 5 Hz (10 nodes a tick) fell
+
+
+def gait_warnings(gait: str) -> list[str]:
+    """What is known to go wrong with ``gait`` (empty when nothing is)."""
+    if gait in EXPERIMENTAL_GAITS:
+        return [f"gait {gait!r} is experimental: it does not walk in the lockstep closed loop "
+                f"({EXPERIMENTAL_GAITS[gait]}; doc/locomotion.md); trot and walk do"]
+    if gait == "stand":
+        return ["gait 'stand': the feet stay down and cmd_vel is not followed"]
+    return []
 
 
 def timing_warnings(dt: float, n_nodes: int, period: float, publish_points: int,
@@ -127,8 +137,8 @@ class MpcParameters:
           float_range(0.05, 2.0))
         d("step_height", float(st.gait.step_height), "swing apex height (m); live",
           float_range(0.0, 0.3))
-        d("duty_factor", float(st.gait.duty_factor), "stance fraction of a cycle; live",
-          float_range(0.05, 1.0))
+        d("duty_factor", float(st.gait.duty_factor or 0.0), "stance fraction of a cycle (0: "
+          "the gait's own, walk 0.75, the others 0.5); live", float_range(0.0, 1.0))
         for name, vmax, unit in zip(LIVE_LIMITS, st.max_velocity, ("m/s", "m/s", "rad/s"),
                                     strict=True):
             d(name, float(vmax), f"|{name[4:]}| command limit ({unit}); live", float_range(0, 5))
@@ -192,9 +202,12 @@ class MpcParameters:
         st = self.mpc.settings
         if any(n in new for n in LIVE_GAIT):
             g = {n: new.get(n, self._p(n)) for n in LIVE_GAIT}
+            if 0.0 < g["duty_factor"] < 0.05:
+                return SetParametersResult(successful=False, reason=(
+                    f"duty_factor {g['duty_factor']} is below 0.05 (0: the gait's own)"))
             try:
                 self.mpc.set_gait(g["gait"], g["step_duration"], g["step_height"],
-                                  g["duty_factor"])
+                                  g["duty_factor"] or None)
             except ValueError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         if any(n in new for n in LIVE_LIMITS):
@@ -211,6 +224,9 @@ class MpcParameters:
             self.mpc.wp.set_weights(st.weights)
         if new:
             self.get_logger().info(f"parameters updated live: {sorted(new)}")
+        if "gait" in new:
+            for note in gait_warnings(new["gait"]):
+                self.get_logger().warning(note)
         return SetParametersResult(successful=True)
 
 
