@@ -401,6 +401,12 @@ def test_diagnostics_warn_on_solver_failures_not_on_real_time_iterations(context
     status = node._pub_diag.msgs[-1].status[0]
     assert status.level == DiagnosticStatus.WARN and "solver failure" in status.message
     node.mpc.failures = 0
+    # a plan far from feasible (a collapsing gait: violation 100-140; walking: < 4) is WARN
+    plan = copy.copy(node.plan)
+    plan.stats = {**plan.stats, "constraint_violation": 120.0}
+    node._publish_diagnostics(plan, 12 * NS_PER_S)
+    status = node._pub_diag.msgs[-1].status[0]
+    assert status.level == DiagnosticStatus.WARN and "far from feasible" in status.message
     node.destroy_node()
 
 
