@@ -176,6 +176,7 @@ class Simulator:
         self._tau = np.zeros(self.n_joints)
         self._pushes: list[tuple[int, np.ndarray, np.ndarray, int]] = []
         self._steps = 0
+        self._touched = False  # stepped since the world was built (see reset)
         self.reset()
 
     # ------------------------------------------------------------------ setup helpers
@@ -245,13 +246,17 @@ class Simulator:
         """Back to the standing start: nominal posture on the ground, at rest, holding it.
 
         Drops the trajectory and any push. ``reset_time=False`` keeps the clock running (the
-        ROS node does, so that ``/clock`` never jumps back). A world whose state is no
-        longer finite (pybullet keeps NaNs in its contact caches) is rebuilt first.
+        ROS node does, so that ``/clock`` never jumps back). The world is rebuilt (0.1-0.3
+        s) once it has been stepped: pybullet keeps contact data across a
+        teleport (the feet's forces of before the reset, runs that differed from a fresh
+        simulator's by 0.5 mm) and NaNs a blown-up step left in its caches (a reset robot
+        then fell through the ground while its state read finite).
         """
-        if self._steps and not self._state_finite():
+        if self._touched:
             p.resetSimulation(physicsClientId=self.client)
             self._build_world()
         self.set_state(self.q_start)
+        self._touched = False
         self.reference.hold(self._joint_angles(self.q_start), self.tau_standing)
         self._tau[:] = 0.0
         self._pushes.clear()
@@ -263,9 +268,21 @@ class Simulator:
         return bool(np.all(np.isfinite(st.q)) and np.all(np.isfinite(st.v)))
 
     def set_state(self, q: np.ndarray, v: np.ndarray | None = None) -> None:
-        """Teleport the robot to ``q`` (nq,) with velocity ``v`` (nv,) (Pinocchio conventions)."""
+        """Teleport the robot to ``q`` (nq,) with velocity ``v`` (nv,) (Pinocchio conventions).
+
+        Raises:
+            ValueError: a shape other than (nq,) / (nv,), a value that is not finite, a zero
+                quaternion (nothing changed).
+        """
         q = np.asarray(q, dtype=float)
         v = np.zeros(self.model.nv) if v is None else np.asarray(v, dtype=float)
+        if q.shape != (self.model.nq,) or v.shape != (self.model.nv,):
+            raise ValueError(f"set_state: q of shape {q.shape}, v {v.shape}; the model has q "
+                             f"({self.model.nq},), v ({self.model.nv},)")
+        if not (np.isfinite(q).all() and np.isfinite(v).all()):
+            raise ValueError("set_state: the state is not finite")
+        if not np.linalg.norm(q[3:7]) > 1e-9:
+            raise ValueError("set_state: the base quaternion is zero")
         quat = q[3:7] / np.linalg.norm(q[3:7])
         com_pos, com_quat = transform_multiply(q[0:3], quat, self.robot.inertial_pos,
                                                self.robot.inertial_quat)
@@ -334,7 +351,15 @@ class Simulator:
 
     # ------------------------------------------------------------------ physics
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` physics steps with the joint controller running at every step."""
+        """Advance ``n`` physics steps with the joint controller running at every step.
+
+        Raises:
+            ValueError: ``n`` is not an integer >= 0.
+        """
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise ValueError(f"step(n): n must be an integer >= 0, got {n!r}")
+        if n:
+            self._touched = True
         body, cid, joints = self.body, self.client, self._pb_joints
         kp, kd, lim, dt = self.kp, self.kd, self.effort_limit, self.dt
         reference = self.reference.reference
