@@ -13,20 +13,31 @@ command and the CasADi version, so a changed function never loads a stale librar
 are written under a temporary name and renamed into place: concurrent processes may compile
 the same function, the last rename wins and every reader sees a complete file.
 
+A cached library that is damaged (empty, not a shared object, truncated: a disk filled up,
+a copy cut short) is rebuilt, never loaded (a truncated one killed the process with SIGBUS).
+Without a working compiler or a writable cache, ``fn`` is returned uncompiled (slower, same
+numbers) with one warning that says why. A compiler whose Python process dies (SIGTERM,
+SIGKILL) is killed with its whole process group, and build folders left by a killed process
+are removed by later builds.
+
 Set ``HORIZON_MPC_NO_CODEGEN=1`` to get ``fn`` back unchanged (debugging, or no compiler).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import hashlib
 import logging
 import os
 import platform
 import re
+import shlex
 import shutil
 import signal
+import struct
 import subprocess
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -38,6 +49,7 @@ import numpy as np
 __all__ = [
     "STATS",
     "BufferedFunction",
+    "CC_ARGV",
     "CompileStats",
     "arch_flags",
     "codegen_enabled",
@@ -51,6 +63,8 @@ __all__ = [
 _log = logging.getLogger(__name__)
 
 CC = os.environ.get("CC", "gcc")
+#: the compiler command: ``$CC`` split as a shell would ("ccache gcc", "gcc -pipe")
+CC_ARGV = tuple(shlex.split(CC)) or ("gcc",)
 # Optimisation level by size of the generated C. SX code is long straight-line arithmetic:
 # measured on go2's inverse-dynamics derivatives mapped over 50 nodes (423 kB of C), -O1
 # compiles in 10 s against 24 s for -O3 and runs within 5% of it (doc/benchmarks.md).
@@ -97,9 +111,25 @@ def default_cache_dir() -> Path:
 
 
 def function_name(text: str) -> str:
-    """``text`` made a valid CasADi Function (and C) name: ``[A-Za-z](_?[A-Za-z0-9])*``."""
-    out = re.sub(r"_+", "_", re.sub(r"\W", "_", text)).strip("_")
-    return out if out[:1].isalpha() else "f_" + out
+    """``text`` made a valid CasADi Function (and C) name: ``[A-Za-z](_?[A-Za-z0-9])*``, ASCII,
+    at most 64 characters (a longer one keeps a hash of the rest), and never a C keyword, a
+    libm function or CasADi's own ``casadi_`` prefix (``sin``, ``int``, ``casadi_f0`` did not
+    compile)."""
+    out = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", text)).strip("_")
+    if not out[:1].isalpha() or out in _C_RESERVED or out.startswith("casadi_"):
+        out = "f_" + out
+    if len(out) > 64:
+        out = f"{out[:55]}_{hashlib.sha256(out.encode()).hexdigest()[:8]}"
+    return out
+
+
+# C keywords and libm names a generated function would clash with (its own symbol is
+# the function's name)
+_C_RESERVED = frozenset("""auto break case char const continue default do double else enum
+extern float for goto if inline int long register restrict return short signed sizeof static
+struct switch typedef union unsigned void volatile while main abs acos asin atan atan2 cbrt
+ceil cos cosh erf exp expm1 fabs floor fmax fmin fmod hypot log log10 log1p log2 pow round
+sin sinh sqrt tan tanh trunc sign copysign""".split())
 
 
 def _opt_flags(c_size: int) -> tuple[str, ...]:
@@ -122,7 +152,7 @@ def _cpu_flags() -> frozenset[str]:
 
 
 def _compiler_accepts(flag: str) -> bool:
-    res = subprocess.run([CC, flag, "-x", "c", "-fsyntax-only", "-"], input="",
+    res = subprocess.run([*CC_ARGV, flag, "-x", "c", "-fsyntax-only", "-"], input="",
                          capture_output=True, text=True, check=False)
     return res.returncode == 0
 
@@ -142,7 +172,7 @@ def arch_flags() -> tuple[str, ...]:
     elif choice != "auto":
         flags = (f"-march={choice}",)
     elif (platform.machine() in ("x86_64", "AMD64") and _X86_64_V3 <= _cpu_flags()
-          and shutil.which(CC) and _compiler_accepts("-march=x86-64-v3")):
+          and shutil.which(CC_ARGV[0]) and _compiler_accepts("-march=x86-64-v3")):
         flags = ("-march=x86-64-v3",)
     else:
         flags = ()
@@ -193,15 +223,69 @@ def compile_function(
     if str(lib) in _LOADED:
         STATS.memory_hits += 1
         return _LOADED[str(lib)]
-    folder.mkdir(parents=True, exist_ok=True)
-    if lib.is_file():
-        _log.debug("loading %s from the cache (%s)", fn.name(), lib)
-        STATS.loaded += 1
-    else:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        damage = _damage(lib) if lib.is_file() else None
+        if damage:
+            _log.warning("cached library %s is damaged (%s): rebuilding it", lib, damage)
+            lib.unlink(missing_ok=True)
+        if lib.is_file():
+            _log.debug("loading %s from the cache (%s)", fn.name(), lib)
+            STATS.loaded += 1
+        else:
+            _build(fn, lib)
+    except OSError as exc:  # no compiler, a cache folder that cannot be written
+        _warn_uncompiled(f"{type(exc).__name__}: {exc}")
+        return fn
+    try:
+        compiled = ca.external(fn.name(), str(lib))
+    except RuntimeError as exc:  # not loadable after all (dlopen): one rebuild
+        _log.warning("cached library %s does not load (%s): rebuilding it", lib,
+                     str(exc).splitlines()[-1])
+        lib.unlink(missing_ok=True)
         _build(fn, lib)
-    compiled = ca.external(fn.name(), str(lib))
+        compiled = ca.external(fn.name(), str(lib))
     _LOADED[str(lib)] = compiled
     return compiled
+
+
+_UNCOMPILED_WARNED: set[str] = set()
+
+
+def _warn_uncompiled(reason: str) -> None:
+    if reason not in _UNCOMPILED_WARNED:
+        _UNCOMPILED_WARNED.add(reason)
+        _log.warning("cannot compile CasADi functions (%s): running them uncompiled (slower); "
+                     "install a C compiler (CC=%s), set HORIZON_MPC_CACHE_DIR to a writable "
+                     "folder, or HORIZON_MPC_NO_CODEGEN=1 to silence this", reason, CC)
+
+
+def _damage(lib: Path) -> str | None:
+    """Why the shared library file ``lib`` cannot be a complete one, or None. ELF (Linux):
+    the magic number and the section header table, which the linker writes last, inside the
+    file; elsewhere only emptiness is checked."""
+    try:
+        with open(lib, "rb") as fh:
+            head = fh.read(64)
+            size = os.fstat(fh.fileno()).st_size
+    except OSError as exc:
+        return f"unreadable: {exc}"
+    if size == 0:
+        return "empty"
+    if not sys.platform.startswith("linux"):
+        return None
+    if len(head) < 52 or head[:4] != b"\x7fELF":
+        return "not an ELF shared object"
+    order = "<" if head[5] == 1 else ">"
+    if head[4] == 2 and len(head) >= 64:  # ELF64
+        (shoff,), (shentsize, shnum) = (struct.unpack_from(order + "Q", head, 0x28),
+                                        struct.unpack_from(order + "HH", head, 0x3A))
+    else:  # ELF32
+        (shoff,), (shentsize, shnum) = (struct.unpack_from(order + "I", head, 0x20),
+                                        struct.unpack_from(order + "HH", head, 0x2E))
+    if shoff + shentsize * shnum > size:
+        return f"truncated ({size} bytes, its section table ends at {shoff + shentsize * shnum})"
+    return None
 
 
 def compiled_library(fn: ca.Function) -> Path | None:
@@ -220,6 +304,7 @@ def forget_loaded() -> None:
 
 
 def _build(fn: ca.Function, lib: Path) -> None:
+    _remove_stale_builds(lib.parent)
     work = Path(tempfile.mkdtemp(prefix=".build_", dir=lib.parent))
     try:
         c_name = f"{fn.name()}.c"
@@ -232,7 +317,7 @@ def _build(fn: ca.Function, lib: Path) -> None:
         _log.info("compiling %s (%d kB of C, %s)...", fn.name(), size // 1000, " ".join(opt))
         start = time.perf_counter()
         tmp_lib = work / lib.name
-        cmd = [CC, *opt, *_FLAGS, str(c_file), "-o", str(tmp_lib), "-lm"]
+        cmd = [*CC_ARGV, *opt, *_FLAGS, str(c_file), "-o", str(tmp_lib), "-lm"]
         returncode, stderr = _run_compiler(cmd)
         if returncode != 0:
             raise RuntimeError(
@@ -245,12 +330,50 @@ def _build(fn: ca.Function, lib: Path) -> None:
         shutil.rmtree(work, ignore_errors=True)
 
 
+STALE_BUILD_S = 3600.0  # a build folder this old was left by a killed process
+
+
+def _remove_stale_builds(folder: Path) -> None:
+    now = time.time()
+    for old in folder.glob(".build_*"):
+        with contextlib.suppress(OSError):
+            if now - old.stat().st_mtime > STALE_BUILD_S:
+                shutil.rmtree(old, ignore_errors=True)
+
+
+# The compiler runs under `sh` in a process group of its own; the shell kills that group
+# (the driver, cc1, as, ld) when it gets SIGTERM, which Linux sends it when this process
+# dies (PR_SET_PDEATHSIG), also by SIGKILL: a killed Python left gcc compiling for minutes
+_GROUP_GUARD = 'trap "kill -KILL 0" TERM; "$@" & wait $!'
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    _PRCTL(_PR_SET_PDEATHSIG, int(signal.SIGTERM))
+
+
+_PRCTL = None
+if sys.platform.startswith("linux"):
+    with contextlib.suppress(OSError, AttributeError):
+        _PRCTL = ctypes.CDLL(None, use_errno=True).prctl  # resolved before any fork
+
+
 def _run_compiler(cmd: list[str]) -> tuple[int, str]:
-    """Run the compiler in a process group of its own; if anything interrupts the wait
-    (a signal handler raising, KeyboardInterrupt), the whole group is killed: killing the
-    driver alone left its cc1 compiling for tens of seconds."""
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    """Run the compiler in a process group of its own, killed with it when this process
+    dies (see ``_GROUP_GUARD``); if anything interrupts the wait (a signal handler raising,
+    KeyboardInterrupt), the whole group is killed: killing the driver alone left its cc1
+    compiling for tens of seconds.
+
+    Raises:
+        FileNotFoundError: no such compiler.
+    """
+    if shutil.which(cmd[0]) is None:
+        raise FileNotFoundError(f"C compiler {cmd[0]!r} not found on PATH")
+    guarded = _PRCTL is not None and shutil.which("sh") is not None
+    proc = subprocess.Popen(["sh", "-c", _GROUP_GUARD, "sh", *cmd] if guarded else cmd,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True,
+                            preexec_fn=_die_with_parent if guarded else None)  # noqa: PLW1509
     try:
         _, stderr = proc.communicate()
     except BaseException:

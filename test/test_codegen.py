@@ -115,7 +115,7 @@ def test_default_cache_dir_follows_xdg(monkeypatch, tmp_path):
 
 
 def test_compiler_errors_are_reported(cache, monkeypatch):
-    monkeypatch.setattr(codegen, "CC", "false")  # a "compiler" that always fails
+    monkeypatch.setattr(codegen, "CC_ARGV", ("false",))  # a "compiler" that always fails
     x = ca.SX.sym("x")
     with pytest.raises(RuntimeError, match="compiling broken failed"):
         codegen.compile_function(ca.Function("broken", [x], [x * 3]))
@@ -219,3 +219,88 @@ def test_each_target_gets_its_own_library(cache, fresh_arch, monkeypatch):
     args = [np.array([0.1, -0.4, 2.0]), 1.5]
     for a, b in zip(plain.call(args), native.call(args), strict=True):
         np.testing.assert_allclose(a.full(), b.full(), rtol=1e-14)
+
+
+@pytest.mark.parametrize("damage", ["empty", "truncated", "garbage"])
+def test_a_damaged_cached_library_is_rebuilt_not_loaded(cache, damage, caplog):
+    """A zero-byte or garbage file was a CasADi assertion at every later run; a truncated
+    one killed the process (SIGBUS) when loaded."""
+    fn = _small_function()
+    codegen.compile_function(fn)
+    lib = next(cache.glob(f"{fn.name()}_*.so"))
+    data = lib.read_bytes()
+    lib.unlink()  # a new file: this process still maps the old one (truncating it in place
+    # would crash it at its next call)
+    lib.write_bytes({"empty": b"", "truncated": data[:len(data) // 2],
+                     "garbage": b"not a library" * 50}[damage])
+    codegen.forget_loaded()
+    compiled = codegen.STATS.compiled
+    with caplog.at_level("WARNING", logger="horizon_mpc.codegen"):
+        again = codegen.compile_function(fn)
+    assert codegen.STATS.compiled == compiled + 1 and "is damaged" in caplog.text
+    x = np.linspace(0.1, 0.9, fn.size1_in(0))
+    for got, want in zip(again(x, 2.0), fn(x, 2.0), strict=True):
+        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-12)
+    assert lib.read_bytes() != b"" and codegen._damage(lib) is None
+
+
+def test_without_a_compiler_or_a_writable_cache_the_function_runs_uncompiled(
+        tmp_path, monkeypatch, caplog):
+    monkeypatch.setattr(codegen, "CC_ARGV", ("no-such-cc",))
+    monkeypatch.setattr(codegen, "_UNCOMPILED_WARNED", set())
+    fn = _small_function()
+    with caplog.at_level("WARNING", logger="horizon_mpc.codegen"):
+        assert codegen.compile_function(fn, cache_dir=tmp_path / "c") is fn
+        assert codegen.compile_function(fn, cache_dir=tmp_path / "c") is fn
+    assert caplog.text.count("running them uncompiled") == 1  # one warning per reason
+    assert "'no-such-cc' not found" in caplog.text
+    (tmp_path / "file").write_text("")
+    monkeypatch.setattr(codegen, "CC_ARGV", ("gcc",))
+    assert codegen.compile_function(fn, cache_dir=tmp_path / "file" / "c") is fn
+
+
+def test_function_names_are_c_identifiers_that_clash_with_nothing():
+    for text, expected in (("sin", "f_sin"), ("int", "f_int"), ("casadi_f0", "f_casadi_f0"),
+                           ("vélo", "v_lo"), ("2d-arm", "f_2d_arm"), ("ok_name", "ok_name")):
+        assert codegen.function_name(text) == expected
+    long = codegen.function_name("x" * 300)
+    assert len(long) <= 64 and long != codegen.function_name("x" * 299)
+
+
+_BIG_COMPILE = """
+import sys
+import casadi as ca
+from horizon_mpc import codegen
+x = ca.SX.sym("x", 60)
+e = x
+for i in range(60):
+    e = ca.sin(e * 1.0001 + i) * ca.cos(e[::-1])
+codegen.compile_function(ca.Function("slow_to_compile", [x], [ca.jacobian(e, x)]),
+                         cache_dir=sys.argv[1])
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG")
+def test_a_killed_process_takes_its_compiler_with_it(tmp_path):
+    """SIGKILL or SIGTERM of the Python process left gcc compiling (for up to minutes)."""
+    import signal
+    import time
+
+    def compilers() -> list[str]:
+        out = subprocess.run(["ps", "-ww", "-eo", "args"], capture_output=True, text=True).stdout
+        return [line for line in out.splitlines() if str(tmp_path) in line
+                and "slow_to_compile.c" in line and "cc1" in line.split(" ", 1)[0]]
+
+    env = {**os.environ, "PYTHONPATH": str(Path(codegen.__file__).resolve().parents[1])}
+    for sig in (signal.SIGKILL, signal.SIGTERM):
+        proc = subprocess.Popen([sys.executable, "-c", _BIG_COMPILE, str(tmp_path)], env=env)
+        end = time.monotonic() + 60
+        while not compilers():
+            assert time.monotonic() < end and proc.poll() is None, "no compiler ran"
+            time.sleep(0.05)
+        proc.send_signal(sig)
+        proc.wait()
+        end = time.monotonic() + 10
+        while compilers():
+            assert time.monotonic() < end, f"compiler left running after {sig.name}"
+            time.sleep(0.05)

@@ -314,7 +314,7 @@ def test_unavailable_with_no_codegen_says_why(compiled, monkeypatch, caplog):
 
 def test_unavailable_without_a_compiler_says_why(compiled, monkeypatch, caplog):
     riccati_c._forget()
-    monkeypatch.setattr(riccati_c.codegen, "CC", "no-such-compiler-xyz")
+    monkeypatch.setattr(riccati_c.codegen, "CC_ARGV", ("no-such-compiler-xyz",))
     with caplog.at_level("WARNING", logger=riccati_c.__name__):
         assert not riccati_c.available()
     assert "no-such-compiler-xyz" in caplog.text

@@ -76,7 +76,7 @@ def _variant() -> int:
 def _key(source: bytes) -> str:
     h = hashlib.sha256()
     # the machine too: a cache directory shared by x86-64 and aarch64 hosts keeps one of each
-    for part in (source, " ".join(FLAGS).encode(), codegen.CC.encode(),
+    for part in (source, " ".join(FLAGS).encode(), " ".join(codegen.CC_ARGV).encode(),
                  platform.machine().encode(), b"riccati-v2"):
         h.update(part)
         h.update(b"\0")
@@ -95,7 +95,7 @@ def _build(lib: Path) -> None:
     work = Path(tempfile.mkdtemp(prefix=".build_riccati_", dir=lib.parent))
     try:
         tmp = work / lib.name
-        cmd = [codegen.CC, *FLAGS, *map(str, SOURCES), "-o", str(tmp), "-lm"]
+        cmd = [*codegen.CC_ARGV, *FLAGS, *map(str, SOURCES), "-o", str(tmp), "-lm"]
         _log.info("compiling %s ...", ", ".join(path.name for path in SOURCES))
         start = time.perf_counter()
         res = subprocess.run(cmd, capture_output=True, text=True, check=False)
@@ -126,8 +126,9 @@ def _load() -> ctypes.CDLL:
         raise RuntimeError("compiled Riccati recursion unavailable: HORIZON_MPC_NO_CODEGEN is set")
     if _failure is None:
         try:
-            if shutil.which(codegen.CC) is None:
-                raise RuntimeError(f"no C compiler: {codegen.CC!r} is not on PATH (set $CC)")
+            if shutil.which(codegen.CC_ARGV[0]) is None:
+                raise RuntimeError(f"no C compiler: {codegen.CC_ARGV[0]!r} is not on PATH "
+                                   "(set $CC)")
             lib = library_path()
             if not lib.is_file():
                 _build(lib)
