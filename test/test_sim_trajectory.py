@@ -66,6 +66,16 @@ def test_non_increasing_times_rejected():
         command(times=(0.0, 0.5, 0.5)).validate(JOINTS)
 
 
+def test_points_too_close_for_their_motion_are_rejected():
+    """Two points 1 ns and 0.3 rad apart (3e8 rad/s): accepted, the robot launched."""
+    positions = np.zeros((2, len(JOINTS)))
+    positions[1, 1] = 0.3
+    cmd = JointTrajectoryCommand(JOINTS, 0.0, [0.0, 1e-9], positions)
+    with pytest.raises(ValueError, match=f"ask joint '{JOINTS[1]}' to move 0.3 in 1e-09 s"):
+        cmd.validate(JOINTS)
+    JointTrajectoryCommand(JOINTS, 0.0, [0.0, 0.02], positions).validate(JOINTS)  # 15 rad/s
+
+
 def test_negative_first_time_rejected():
     with pytest.raises(ValueError, match="negative"):
         command(times=(-0.1, 0.5, 1.0)).validate(JOINTS)

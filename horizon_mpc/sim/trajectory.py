@@ -23,12 +23,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["JointTrajectoryCommand", "ReferenceGenerator"]
+__all__ = ["PLAUSIBLE", "PLAUSIBLE_SPEED", "JointTrajectoryCommand", "ReferenceGenerator"]
 
 
 #: magnitudes no joint reference reaches (rad or m, rad/s or m/s, N m or N): beyond them a
 #: command is garbage, and its interpolation would overflow into the physics (NaN state)
 PLAUSIBLE = {"positions": 1e4, "velocities": 1e5, "efforts": 1e7}
+#: rad/s or m/s: the speed between two consecutive points no joint reaches (URDF limits:
+#: 20-40 rad/s); two points 1 ns apart and 0.3 rad apart asked for 3e8 rad/s, which the
+#: interpolation fed to the D term: 1000 N m, the robot launched at 100 m/s
+PLAUSIBLE_SPEED = 1e2
 
 
 def _finite_array(name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
@@ -127,6 +131,14 @@ class JointTrajectoryCommand:
             )
         shape = (k, len(names))
         positions = _finite_array("positions", self.positions, shape)
+        if k > 1:
+            speed = np.abs(np.diff(positions, axis=0)) / steps[:, None]
+            if np.any(speed > PLAUSIBLE_SPEED):
+                i, j = np.unravel_index(int(np.argmax(speed)), speed.shape)
+                raise ValueError(
+                    f"points {i} and {i + 1} ask joint {names[j]!r} to move "
+                    f"{abs(positions[i + 1, j] - positions[i, j]):.3g} in {steps[i]:.3g} s "
+                    f"({speed[i, j]:.3g} per s, beyond {PLAUSIBLE_SPEED:g})")
         velocities = None
         if self.velocities is not None:
             velocities = _finite_array("velocities", self.velocities, shape)
