@@ -1162,3 +1162,36 @@ def test_params_file_sections_that_match_no_node_are_named(tmp_path):
     assert len(notes) == 1 and "['mpc_node']" in notes[0]
     assert unmatched_params_file_sections([*argv[:3], str(tmp_path / "none.yaml")], "mpc",
                                           "/mpc") == []  # unreadable: rcl's to report
+
+
+def test_state_reliability_best_effort_hears_a_sensor_data_publisher(context, walking_mpc):
+    """A driver publishing joint_states/odom with the sensor-data QoS (best effort) never
+    reaches a reliable subscription: with state_reliability best_effort it does."""
+    from rclpy.qos import qos_profile_sensor_data
+
+    for reliability, heard in (("reliable", False), ("best_effort", True)):
+        walking_mpc.t_last = None
+        node = MpcNode(parameter_overrides=[Parameter("trigger", value="state"),
+                                            Parameter("state_reliability", value=reliability)],
+                       mpc=walking_mpc, context=context)
+        probe = Node("driver", context=context)
+        pub_js = probe.create_publisher(JointState, "joint_states", qos_profile_sensor_data)
+        pub_odom = probe.create_publisher(Odometry, "odom", qos_profile_sensor_data)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        executor.add_node(probe)
+        try:
+            _, q = standing_configuration(walking_mpc.cfg)
+            end = time.monotonic() + (5.0 if heard else 1.0)
+            while time.monotonic() < end and node._joints is None:
+                stamp = time_from_ns(probe.get_clock().now().nanoseconds)
+                pub_js.publish(joint_state_to_msg(stamp, node.joint_names, q[7:],
+                                                  np.zeros(len(q) - 7)))
+                pub_odom.publish(odometry_to_msg(stamp, q[:3], q[3:7], np.zeros(3),
+                                                 np.zeros(3)))
+                executor.spin_once(timeout_sec=0.02)
+            assert (node._joints is not None) == heard, reliability
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+            probe.destroy_node()

@@ -30,6 +30,7 @@ from nav_msgs.msg import Odometry, Path
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
@@ -196,8 +197,11 @@ class MpcNode(MpcParameters, Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_path = self.create_publisher(Path, "~/predicted_base_path", 10)
         # depth 1: a tick plans from the newest state, never from a backlog of stale ones
-        self.create_subscription(JointState, "joint_states", self._on_joint_state, 1)
-        self.create_subscription(Odometry, "odom", self._on_odom, 1)
+        state_qos = QoSProfile(depth=1, reliability=(
+            ReliabilityPolicy.BEST_EFFORT if self._p("state_reliability") == "best_effort"
+            else ReliabilityPolicy.RELIABLE))
+        self.create_subscription(JointState, "joint_states", self._on_joint_state, state_qos)
+        self.create_subscription(Odometry, "odom", self._on_odom, state_qos)
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if self.trigger == "timer":

@@ -132,6 +132,10 @@ class MpcParameters:
           "a whole tick", float_range(0, 1), ro=True)
         d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
           "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)
+        d("state_reliability", "reliable", "QoS reliability of the joint_states and odom "
+          "subscriptions: 'reliable' (matches reliable publishers: ros2 topic pub, sim_node) "
+          "or 'best_effort' (matches both, e.g. a driver publishing with the sensor-data "
+          "profile, which a reliable subscription never receives)", ro=True)
         d("gait", st.gait.name, f"gait ({', '.join(GAITS)}); live")
         d("step_duration", float(st.gait.step_duration), "swing duration (s); live",
           float_range(0.05, 2.0))
@@ -165,6 +169,9 @@ class MpcParameters:
           "node clock (at most one per tick, and at once when the level rises; 0: every tick)",
           float_range(0, 1000), ro=True)
         self._check_trigger(self._p("trigger"))
+        if self._p("state_reliability") not in ("reliable", "best_effort"):
+            raise ValueError("state_reliability must be 'reliable' or 'best_effort', got "
+                             f"{self._p('state_reliability')!r}")
 
     @staticmethod
     def _check_trigger(trigger: str) -> None:
