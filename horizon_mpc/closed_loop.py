@@ -115,6 +115,7 @@ class Recording:
     # other nodes heard publishing the loop's topics ("joint_trajectory: 2 publishers, 1
     # expected"): the run was not isolated, its figures may mix in theirs
     foreign_publishers: list[str] = field(default_factory=list)
+    interrupted: bool = False  # Ctrl-C / SIGTERM ended the run before its duration
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The per-period lists as arrays (rows = time)."""
@@ -158,12 +159,20 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         raise ValueError(f"mode must be 'lockstep' or 'realtime', got {mode!r}")
     cfg = load_robot_config(robot)  # an unknown robot fails here, before any node or process
     loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
-    if mode == "lockstep":
-        rec = _run_lockstep(robot, iterations, loop, mpc_parameters,
-                            private_domain_id() if domain_id is None else domain_id)
-    else:
-        rec = _run_realtime(robot, iterations, loop, domain_id, mpc_parameters, mpc_command,
-                            ready_timeout)
+    try:
+        if mode == "lockstep":
+            rec = _run_lockstep(robot, iterations, loop, mpc_parameters,
+                                private_domain_id() if domain_id is None else domain_id)
+        else:
+            rec = _run_realtime(robot, iterations, loop, domain_id, mpc_parameters,
+                                mpc_command, ready_timeout)
+    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM in the CLI: the run so far, if any
+        rec = loop.rec
+        if not rec.t:
+            raise
+        rec.interrupted = True
+        log.warning("interrupted at t = %.2f s of sim time: what follows is the run so far",
+                    rec.t[-1])
     rec.max_velocity, rec.max_command_norm = command_limits(cfg, mpc_parameters)
     return rec
 
@@ -341,9 +350,16 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
     return rec
 
 
-def control_period(robot: str) -> float:
-    """The MPC's control period (s) in ``robot``'s config (``mpc.dt``)."""
-    return MpcSettings.from_dict(load_robot_config(robot).section("mpc")).dt
+def control_period(robot: str, mpc_parameters: Mapping[str, object] | None = None) -> float:
+    """The MPC node's control period (s): ``1 / control_rate`` when given, else its ``dt``
+    (a ``-p dt`` or the config's ``mpc.dt``). The simulator steps and the run records on
+    this grid (it was the config's dt: with ``-p dt=0.03`` a third of the periods were
+    reported without a tick, none missing)."""
+    given = dict(mpc_parameters or {})
+    if "control_rate" in given:
+        return 1.0 / float(given["control_rate"])
+    return float(given.get("dt", MpcSettings.from_dict(
+        load_robot_config(robot).section("mpc")).dt))
 
 
 def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: int | None,
@@ -352,7 +368,7 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
     """The MPC in a process of its own (timer trigger), the simulator free at realtime
     factor 1 in this one; the clock starts once the MPC's first plan has arrived."""
     rec = loop.rec
-    dt = control_period(robot)
+    dt = control_period(robot, mpc_parameters)
     t_start = time.perf_counter()
     with MpcProcess(robot, iterations, domain_id, mpc_parameters, mpc_command) as child:
         rec.domain_id = child.domain_id
@@ -463,12 +479,18 @@ def _twist(cmd: np.ndarray) -> Twist:
     return msg
 
 
+def _interrupt(*_: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI: run the closed loop and write summary.json, plots and a GIF into ``--out``.
 
     Exit code 0; 1 when the robot fell, the MPC process (real-time mode) failed or another
     node published on the run's topics (the log says which); 2 for arguments it cannot run
-    with (profile, robot, ``-p``, durations), in one error line before anything starts.
+    with (profile, robot, ``-p``, durations), in one error line before anything starts; 130
+    when Ctrl-C or SIGTERM ended the run (the outputs, marked ``interrupted``, cover the run
+    so far).
     """
     from horizon_mpc.closed_loop_report import summarise, write_report
 
@@ -500,6 +522,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         # started with SIGINT ignored (a background job of a non-interactive shell inherits
         # that, and Python keeps it: the run would go on, deaf to SIGINT)
         signal.signal(signal.SIGINT, signal.default_int_handler)
+        # SIGTERM (a supervisor, `timeout`) ends the run as Ctrl-C does: the MPC process is
+        # stopped at once and the run so far written (it died with no cleanup, its child
+        # orphaned until the parent-death signal reached it)
+        signal.signal(signal.SIGTERM, _interrupt)
     # DDS discovery on this host only, for this process and the MPC process alike
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     profile = args.profile or DEFAULT_PROFILE  # an empty --profile (launch default) = default
@@ -513,6 +539,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
                   pushes=pushes, mpc_parameters=mpc_parameters, domain_id=args.domain_id)
+    except KeyboardInterrupt:
+        log.error("interrupted before the run started: no outputs written")
+        return 130
     except MpcProcessError as exc:
         log.error("%s", exc)
         return 1
@@ -529,6 +558,9 @@ def main(argv: Sequence[str] | None = None) -> int:
              age["median"], age["p95"], summary["falls"]["count"])
     for path in written:
         log.info("wrote %s", path)
+    if rec.interrupted:
+        log.error("interrupted: the outputs cover the run until t = %.2f s", rec.t[-1])
+        return 130
     if summary["falls"]["count"]:
         log.error("the robot fell (first at t = %.2f s)", summary["falls"]["times"][0])
         return 1
