@@ -1098,6 +1098,21 @@ def test_timing_settings_outside_where_the_robot_walked_are_warned_about():
     assert timing_warnings(0.02, 24, 0.2, 6, trigger="state") == []  # ticks on states
     assert any("dt 0.04 s" in w for w in timing_warnings(0.04, 24, 0.04, 6))
     assert any("n_nodes 12" in w for w in timing_warnings(0.02, 12, 0.02, 6))
+    assert any("n_nodes 16" in w for w in timing_warnings(0.02, 16, 0.02, 6))  # real time
+    assert timing_warnings(0.02, 20, 0.02, 6) == []
+
+
+def test_prepare_ahead_needs_whole_nodes_per_tick(context, walking_mpc):
+    """100 Hz at dt 0.02 s (half a node a tick): go2 fell at 2.3-2.5 s in real time with
+    prepare_ahead, walked with whole ticks."""
+    for rate, prepared in ((100.0, False), (50.0, True), (25.0, True)):
+        node = sim_time_node(context, walking_mpc, trigger="timer", control_rate=rate,
+                             prepare_ahead=True)
+        try:
+            assert node.mpc.settings.prepare_ahead is prepared, rate
+        finally:
+            walking_mpc.settings.prepare_ahead = False  # the fixture is shared
+            node.destroy_node()
 
 
 def test_more_published_points_than_nodes_are_clamped_with_a_warning(context, walking_mpc,

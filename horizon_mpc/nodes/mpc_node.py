@@ -108,6 +108,18 @@ class MpcNode(MpcParameters, Node):
         settings.max_command_norm = float(self._p("max_command_norm"))
         settings.stand_when_idle = bool(self._p("stand_when_idle"))
         settings.prepare_ahead = bool(self._p("prepare_ahead"))
+        nodes_per_tick = settings.dt * float(self._p("control_rate"))
+        nodes_per_tick = 1.0 / nodes_per_tick if nodes_per_tick > 0 else math.nan
+        if settings.prepare_ahead and self._p("trigger") == "timer" and not abs(
+                nodes_per_tick - round(nodes_per_tick)) <= 0.05:
+            # a tick of a fraction of a node: each preparation predicted node 0 from a warm
+            # start blended between two nodes, and go2 fell at 2.3-2.5 s at 100 Hz
+            # (dt 0.02 s) in real time; whole ticks walked
+            settings.prepare_ahead = False
+            self.get_logger().warning(
+                f"prepare_ahead is off: control_rate {self._p('control_rate'):g} Hz moves the "
+                f"horizon {nodes_per_tick:.3g} nodes a tick (dt {settings.dt:g} s); it needs "
+                "whole nodes (control_rate = 1/dt, or 1/(k dt))")
         settings.max_extrapolation = float(self._p("max_extrapolation"))
         settings.weights = self._weights_from_parameters(settings.weights)
 
