@@ -321,26 +321,28 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
             rec.plan_age.append(sim.now_ns / 1e9 - mpc.plan.t0)
             return True
 
-        while True:
-            executor.spin_once(timeout_sec=0.05)
-            now_ns = sim.now_ns
-            record_ticks()
-            if now_ns >= check_ns:  # once per sim second
-                check_ns = now_ns + 1_000_000_000
-                _foreign_publishers(player, rec)
-            if now_ns - last_rec_ns < dt_ns and last_rec_ns >= 0:
-                continue
-            last_rec_ns = now_ns
-            if loop.period(sim, now_ns / 1e9, dt, pub_cmd, mpc.mpc.cmd, render=True):
-                break
-        # the tick on the last recorded state (the sim waits for its plan: it comes within
-        # a few spins; the run's tick count then covers every recorded period)
-        deadline = time.perf_counter() + 5.0
-        while time.perf_counter() < deadline and not record_ticks():
-            executor.spin_once(timeout_sec=0.05)
-        rec.wall_time = time.perf_counter() - wall0
-        rec.deadline_misses = mpc.deadline_misses
-        rec.stale_skips = mpc.stale_skips
+        try:
+            while True:
+                executor.spin_once(timeout_sec=0.05)
+                now_ns = sim.now_ns
+                record_ticks()
+                if now_ns >= check_ns:  # once per sim second
+                    check_ns = now_ns + 1_000_000_000
+                    _foreign_publishers(player, rec)
+                if now_ns - last_rec_ns < dt_ns and last_rec_ns >= 0:
+                    continue
+                last_rec_ns = now_ns
+                if loop.period(sim, now_ns / 1e9, dt, pub_cmd, mpc.mpc.cmd, render=True):
+                    break
+            # the tick on the last recorded state (the sim waits for its plan: it comes
+            # within a few spins; the run's tick count then covers every recorded period)
+            deadline = time.perf_counter() + 5.0
+            while time.perf_counter() < deadline and not record_ticks():
+                executor.spin_once(timeout_sec=0.05)
+        finally:  # also for an interrupted run: its figures so far
+            rec.wall_time = time.perf_counter() - wall0
+            rec.deadline_misses = mpc.deadline_misses
+            rec.stale_skips = mpc.stale_skips
         _final_isolation_check(player, rec, t_player)
         executor.shutdown()
         for node in (player, mpc, sim):
@@ -395,8 +397,15 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
             rec.build_time = time.perf_counter() - t_start
             executor.add_node(sim)
             cpu0 = (time.process_time(), process_cpu_seconds(child.pid))
-            rec.wall_time = _realtime_loop(executor, sim, monitor, child, pub_cmd, dt, loop,
-                                           lambda: _foreign_publishers(player, rec))
+            wall0 = time.perf_counter()
+            try:
+                rec.wall_time = _realtime_loop(executor, sim, monitor, child, pub_cmd, dt,
+                                               loop, lambda: _foreign_publishers(player, rec))
+            except KeyboardInterrupt:  # the figures of the run so far
+                rec.wall_time = time.perf_counter() - wall0
+                _copy_ticks(monitor.record, rec)
+                rec.mpc_log = child.log_tail(lines=200)
+                raise
             _final_isolation_check(player, rec, t_player)
             rec.mpc_process = {
                 "pid": child.pid, "domain_id": child.domain_id,

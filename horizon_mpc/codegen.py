@@ -119,7 +119,7 @@ def function_name(text: str) -> str:
     if not out[:1].isalpha() or out in _C_RESERVED or out.startswith("casadi_"):
         out = "f_" + out
     if len(out) > 64:
-        out = f"{out[:55]}_{hashlib.sha256(out.encode()).hexdigest()[:8]}"
+        out = f"{out[:55].rstrip('_')}_{hashlib.sha256(out.encode()).hexdigest()[:8]}"
     return out
 
 
@@ -129,7 +129,10 @@ _C_RESERVED = frozenset("""auto break case char const continue default do double
 extern float for goto if inline int long register restrict return short signed sizeof static
 struct switch typedef union unsigned void volatile while main abs acos asin atan atan2 cbrt
 ceil cos cosh erf exp expm1 fabs floor fmax fmin fmod hypot log log10 log1p log2 pow round
-sin sinh sqrt tan tanh trunc sign copysign""".split())
+sin sinh sqrt tan tanh trunc sign copysign j0 j1 jn y0 y1 yn modf frexp ldexp lgamma tgamma
+rint lrint llrint nearbyint remainder remquo scalbn scalbln logb ilogb exp2 fdim fma nan
+erfc asinh acosh atanh lround llround isnan isinf signbit gamma drem significand""".split())
+_C_RESERVED = _C_RESERVED | {n + suffix for n in _C_RESERVED for suffix in ("f", "l")}
 
 
 def _opt_flags(c_size: int) -> tuple[str, ...]:
@@ -244,7 +247,11 @@ def compile_function(
                      str(exc).splitlines()[-1])
         lib.unlink(missing_ok=True)
         _build(fn, lib)
-        compiled = ca.external(fn.name(), str(lib))
+        try:
+            compiled = ca.external(fn.name(), str(lib))
+        except RuntimeError as again:  # e.g. a cache folder mounted noexec
+            _warn_uncompiled(f"{lib.parent}: {str(again).splitlines()[-1]}")
+            return fn
     _LOADED[str(lib)] = compiled
     return compiled
 
@@ -304,6 +311,8 @@ def forget_loaded() -> None:
 
 
 def _build(fn: ca.Function, lib: Path) -> None:
+    if shutil.which(CC_ARGV[0]) is None:  # before generating the C (hundreds of kB)
+        raise FileNotFoundError(f"C compiler {CC_ARGV[0]!r} not found on PATH")
     _remove_stale_builds(lib.parent)
     work = Path(tempfile.mkdtemp(prefix=".build_", dir=lib.parent))
     try:

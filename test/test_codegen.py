@@ -263,8 +263,12 @@ def test_function_names_are_c_identifiers_that_clash_with_nothing():
     for text, expected in (("sin", "f_sin"), ("int", "f_int"), ("casadi_f0", "f_casadi_f0"),
                            ("vélo", "v_lo"), ("2d-arm", "f_2d_arm"), ("ok_name", "ok_name")):
         assert codegen.function_name(text) == expected
+    for text in ("y0", "modf", "sinf", "lgamma"):
+        assert codegen.function_name(text) == "f_" + text
     long = codegen.function_name("x" * 300)
     assert len(long) <= 64 and long != codegen.function_name("x" * 299)
+    cut = codegen.function_name("a" * 54 + "-b" + "c" * 20)  # '_' at the cut: no '__'
+    assert "__" not in cut and ca.Function(cut, [ca.SX.sym("x")], [1]).name() == cut
 
 
 _BIG_COMPILE = """

@@ -409,7 +409,9 @@ def test_a_bad_state_is_refused_before_the_controller_changes(walking_mpc):
     for args, match in (((0.02, bad_q, v), r"not finite at q\[8\]"),
                         ((float("nan"), q, v), "time must be finite"),
                         ((0.02, q[:-1], v), "shapes"),
-                        ((0.02, q, v, [0.1, 0.0]), "3 numbers")):
+                        ((0.02, q, v, [0.1, 0.0]), "3 numbers"),
+                        ((0.02, np.r_[q[:3], np.nan, 0.0, 0.0, 1.0, q[7:]], v),
+                         r"not finite at q\[3\]")):  # was taken as the identity
         with pytest.raises(ValueError, match=match):
             walking_mpc.update(*args)
         np.testing.assert_array_equal(walking_mpc.pose_ref, pose)
@@ -431,3 +433,24 @@ def test_the_stand_gait_does_not_walk_a_command(walking_mpc):
         assert np.all(walking_mpc.cmd == 0.0)
     finally:
         walking_mpc.set_gait("trot", duty_factor=None)
+
+
+@pytest.mark.parametrize("change", ["stand", "shorter_steps_while_stopping"])
+def test_no_gait_change_puts_a_swinging_foot_down(change):
+    """stand while trotting, or a new step duration while a stop finishes the swings,
+    put feet 4-6 cm up into stance."""
+    sch = GaitScheduler(make_gait("trot", step_duration=0.3))
+    sch.command(0.0, moving=True)
+    t = 0.8
+    if change == "stand":
+        new = make_gait("stand")
+    else:
+        sch.command(0.75, moving=False)  # stopping
+        new = make_gait("trot", step_duration=0.15)
+    before = sch.schedule(t, 0, 0.02)
+    sch.set_gait(new, t)
+    after = sch.schedule(t, 0, 0.02)
+    np.testing.assert_array_equal(after.stance, before.stance)
+    np.testing.assert_allclose(after.swing_progress, before.swing_progress)
+    sch.command(t + 0.31, moving=True)
+    assert sch.gait is new and sch.pending is None

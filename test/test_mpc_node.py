@@ -1105,7 +1105,7 @@ def test_timing_settings_outside_where_the_robot_walked_are_warned_about():
 def test_prepare_ahead_needs_whole_nodes_per_tick(context, walking_mpc):
     """100 Hz at dt 0.02 s (half a node a tick): go2 fell at 2.3-2.5 s in real time with
     prepare_ahead, walked with whole ticks."""
-    for rate, prepared in ((100.0, False), (50.0, True), (25.0, True)):
+    for rate, prepared in ((100.0, False), (1000.0, False), (50.0, True), (25.0, True)):
         node = sim_time_node(context, walking_mpc, trigger="timer", control_rate=rate,
                              prepare_ahead=True)
         try:
@@ -1171,11 +1171,12 @@ def test_params_file_sections_that_match_no_node_are_named(tmp_path):
         "mpc_node": {"ros__parameters": {"gait": "walk"}},
         "r1": {"mpc": {"ros__parameters": {"max_vy": 0.2}}}}))
     argv = ["mpc_node", "--ros-args", "--params-file", str(path)]
-    notes = unmatched_params_file_sections(argv, "mpc", "/mpc")
+    notes = unmatched_params_file_sections(argv, "/mpc")
     assert len(notes) == 1 and "['mpc_node', 'r1/mpc']" in notes[0] and "/mpc" in notes[0]
-    notes = unmatched_params_file_sections(argv, "mpc", "/r1/mpc")
-    assert len(notes) == 1 and "['mpc_node']" in notes[0]
-    assert unmatched_params_file_sections([*argv[:3], str(tmp_path / "none.yaml")], "mpc",
+    # namespaced: 'mpc:' is /mpc for rcl, not /r1/mpc
+    notes = unmatched_params_file_sections(argv, "/r1/mpc")
+    assert len(notes) == 1 and "['mpc', 'mpc_node']" in notes[0]
+    assert unmatched_params_file_sections([*argv[:3], str(tmp_path / "none.yaml")],
                                           "/mpc") == []  # unreadable: rcl's to report
 
 
@@ -1210,3 +1211,16 @@ def test_state_reliability_best_effort_hears_a_sensor_data_publisher(context, wa
             executor.shutdown()
             node.destroy_node()
             probe.destroy_node()
+
+
+def test_a_duty_factor_below_the_minimum_is_refused_at_start_up_too(context, walking_mpc):
+    """Refused live, it built a gait of near-total flight at start-up."""
+    with pytest.raises(ValueError, match="duty_factor 0.01 is below 0.05"):
+        sim_time_node(context, walking_mpc, duty_factor=0.01)
+    walking_mpc.set_gait("trot")  # the shared fixture
+    node = sim_time_node(context, walking_mpc, max_command_norm=3.0)  # > sqrt(3): per axis
+    try:
+        assert node.mpc.settings.max_command_norm == 3.0
+    finally:
+        walking_mpc.settings.max_command_norm = math.sqrt(2)
+        node.destroy_node()

@@ -144,7 +144,7 @@ def test_node_selections_accept_masks_and_integer_arrays():
 def test_per_node_values_go_to_the_nodes_in_the_order_they_are_listed(prb):
     """Column j of a (dim, n) value goes to the j-th node listed: nodes=[8, 3] with the
     values (-1, 2) put -1 on node 8 (they were sorted first: IPOPT then met swapped
-    waypoints and called it a success). A node listed twice is refused."""
+    waypoints and called it a success)."""
     u = prb.get_variable("u")
     par = prb.create_parameter("ref", 1)
     con = prb.create_constraint("waypoint", prb.get_variable("x")[0], nodes=[3, 8])
@@ -156,11 +156,12 @@ def test_per_node_values_go_to_the_nodes_in_the_order_they_are_listed(prb):
         for values in (u.lower_bounds, u.upper_bounds - 4.0, u.initial_guess, par.values,
                        con.lower_bounds, con.upper_bounds):
             np.testing.assert_array_equal(values[0, [8, 3]], [-1.0, 2.0])
-    for setter in (lambda: u.set_initial_guess([[1.0, 2.0, 3.0]], nodes=[1, 1, 2]),
-                   lambda: con.set_bounds(0.0, 0.0, nodes=[3, 3])):
-        with pytest.raises(ValueError, match=r"node\(s\) \[.\] listed more than once"):
-            setter()
-    con.set_nodes([3, 3, 8])  # a node set (no values) may name a node twice
+    # a node named twice: the set of nodes; a scalar fills them, per-node values must fit it
+    u.set_initial_guess(0.5, nodes=[2, 1, 2])
+    np.testing.assert_array_equal(u.initial_guess[0, [1, 2]], [0.5, 0.5])
+    with pytest.raises(ValueError, match=r"shape \(1, 3\) does not fit dimension 1 on 2"):
+        u.set_initial_guess([[1.0, 2.0, 3.0]], nodes=[1, 1, 2])
+    con.set_nodes([3, 3, 8])
     assert con.nodes.tolist() == [3, 8]
 
 

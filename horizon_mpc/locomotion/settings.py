@@ -13,7 +13,10 @@ from typing import Any
 from horizon_mpc.config import check_settings
 from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM
 
-__all__ = ["GaitSettings", "MpcSettings", "Weights"]
+__all__ = ["MAX_COMMAND_NORM", "GaitSettings", "MpcSettings", "Weights"]
+
+#: the largest max_command_norm (>= sqrt(3) already leaves the per-axis limits alone)
+MAX_COMMAND_NORM = 10.0
 
 
 @dataclass
@@ -119,6 +122,10 @@ class MpcSettings:
                                        "max_command_norm"),
                        non_negative=("pose_leash", "yaw_leash", "max_extrapolation"),
                        prefix="mpc.")
+        if self.max_command_norm > MAX_COMMAND_NORM:
+            raise ValueError(f"'mpc.max_command_norm' must be in (0, {MAX_COMMAND_NORM:g}] "
+                             f"(>= 1.733 keeps the per-axis limits only), got "
+                             f"{self.max_command_norm!r}")
         for name in ("n_nodes", "iterations"):
             value = getattr(self, name)
             if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):

@@ -368,10 +368,10 @@ class WalkingMpc:
     @staticmethod
     def _clean_q(q: np.ndarray) -> np.ndarray:
         """A copy of ``q`` with a unit base quaternion (identity if it has no direction: a
-        zero, NaN or infinite one)."""
+        zero one; a non-finite one is refused before, :meth:`_checked_state`)."""
         q = np.array(q, dtype=float)
         n = math.hypot(*q[3:7].tolist())  # four numbers: no numpy call (every tick)
-        q[3:7] = q[3:7] / n if 1e-9 < n < math.inf else (0.0, 0.0, 0.0, 1.0)
+        q[3:7] = q[3:7] / n if n > 1e-9 else (0.0, 0.0, 0.0, 1.0)
         return q
 
     def _checked_state(self, t: float, q: np.ndarray, v: np.ndarray
@@ -385,12 +385,11 @@ class WalkingMpc:
         if q.shape != (nq,) or v.shape != (nv,):
             raise ValueError(f"state of shapes q {q.shape}, v {v.shape}; the model has q "
                              f"({nq},), v ({nv},)")
-        q = self._clean_q(q)
         if not (np.isfinite(q).all() and np.isfinite(v).all()):
             bad = [f"{n}[{i}]" for n, x in (("q", q), ("v", v))
                    for i in np.flatnonzero(~np.isfinite(x))]
             raise ValueError(f"state not finite at {', '.join(bad[:6])}: not planned from")
-        return q, v
+        return self._clean_q(q), v
 
     @staticmethod
     def _checked_command(cmd: np.ndarray | None) -> np.ndarray | None:

@@ -6,8 +6,9 @@ Times are absolute (s); the gait's phase is counted from the moment walking star
 
 A new gait while walking (:meth:`GaitScheduler.set_gait`) never makes the contacts jump: a
 new step duration or height keeps the cycle's phase (same feet in the air, at the same
-fraction of their swing); another gait or duty factor is taken once the swings in progress
-have ended (a stop), and walking resumes with it. Swapping the gait under a running phase
+fraction of their swing); another gait or duty factor, ``stand``, or any change while a
+stop is in progress is taken once the swings in progress have ended (a stop), and walking
+resumes with it. Swapping the gait under a running phase
 put feet that were 5 cm up into stance and lifted the standing ones (go2 fell).
 """
 
@@ -40,20 +41,21 @@ class GaitScheduler:
     def set_gait(self, gait: Gait, t: float) -> None:
         """Walk with ``gait`` from time ``t`` on, without a jump of the contacts (see the
         module docstring)."""
-        old = self.gait if self.pending is None else self.pending
         walking = self.t_start is not None and self.gait.name != "stand"
-        if not walking or gait.name == "stand":
+        if not walking:
             self.gait, self.pending = gait, None
             if gait.name == "stand":
                 self.t_start = self.t_stop = None
             return
-        if self.pending is None and (gait.offsets, gait.duty_factor) == (
-                old.offsets, old.duty_factor):
+        if (self.pending is None and self.t_stop is None and gait.name != "stand"
+                and (gait.offsets, gait.duty_factor) == (self.gait.offsets,
+                                                         self.gait.duty_factor)):
             # the same pattern at another pace: keep the phase of the cycle
-            phase = ((t - self.t_start) / old.period) % 1.0
+            phase = ((t - self.t_start) / self.gait.period) % 1.0
             self.t_start = t - phase * gait.period
             self.gait = gait
             return
+        # another pattern (stand included), or a stop in progress: after the swings
         self.pending = gait
         if self.t_stop is None:
             self.t_stop = t

@@ -53,6 +53,7 @@ from horizon_mpc.nodes.mpc_outputs import (
 )
 from horizon_mpc.nodes.mpc_parameters import (
     LIVE_LIMITS,
+    MIN_DUTY_FACTOR,
     MODEL_PARAMETER_DECLARATIONS,
     MpcParameters,
     gait_warnings,
@@ -100,18 +101,23 @@ class MpcNode(MpcParameters, Node):
         if mpc is not None and horizon != (settings.n_nodes, settings.dt):
             raise ValueError(f"n_nodes/dt {horizon} differ from those of the given MPC "
                              f"({settings.n_nodes}, {settings.dt}): build it with them")
+        duty = self._p("duty_factor") or None
+        if duty is not None and duty < MIN_DUTY_FACTOR:
+            raise ValueError(f"duty_factor {duty} is below {MIN_DUTY_FACTOR} (0: the gait's "
+                             "own)")
         settings.n_nodes, settings.dt = horizon
         g = settings.gait
         g.name, g.step_duration = self._p("gait"), self._p("step_duration")
-        g.step_height, g.duty_factor = self._p("step_height"), self._p("duty_factor") or None
+        g.step_height, g.duty_factor = self._p("step_height"), duty
         settings.max_velocity = [self._p(n) for n in LIVE_LIMITS]
         settings.max_command_norm = float(self._p("max_command_norm"))
         settings.stand_when_idle = bool(self._p("stand_when_idle"))
         settings.prepare_ahead = bool(self._p("prepare_ahead"))
         nodes_per_tick = settings.dt * float(self._p("control_rate"))
         nodes_per_tick = 1.0 / nodes_per_tick if nodes_per_tick > 0 else math.nan
-        if settings.prepare_ahead and self._p("trigger") == "timer" and not abs(
-                nodes_per_tick - round(nodes_per_tick)) <= 0.05:
+        if settings.prepare_ahead and self._p("trigger") == "timer" and not (
+                round(nodes_per_tick) >= 1 and abs(nodes_per_tick - round(nodes_per_tick))
+                <= 0.05):
             # a tick of a fraction of a node: each preparation predicted node 0 from a warm
             # start blended between two nodes, and go2 fell at 2.3-2.5 s at 100 Hz
             # (dt 0.02 s) in real time; whole ticks walked
@@ -409,11 +415,11 @@ class MpcNode(MpcParameters, Node):
                 # a late state now and then (a loaded simulator) costs one whole tick and is
                 # counted (diagnostics prepare_misses); warned about when it is the rule
                 if self._recent_misses[-1] and sum(self._recent_misses) > MISS_WARN_SHARE \
-                        * self._recent_misses.maxlen:
+                        * len(self._recent_misses):
                     self._warn("prepare_miss", f"state stamped {t:.4f} s, "
                                f"{abs(self._prepared_ns - stamp_ns) / 1e6:.1f} ms from the "
                                f"prepared tick time: ran a whole tick ({sum(self._recent_misses)}"
-                               f" of the last {self._recent_misses.maxlen} ticks; is "
+                               f" of the last {len(self._recent_misses)} ticks; is "
                                "control_rate the rate of the states/ticks?)")
         except Exception as exc:  # noqa: BLE001 - the node must outlive any solver error
             self.solver_errors += 1

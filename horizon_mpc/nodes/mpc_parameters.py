@@ -21,12 +21,12 @@ from rclpy.parameter import Parameter
 
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.locomotion.gaits import EXPERIMENTAL_GAITS, GAITS
-from horizon_mpc.locomotion.settings import Weights
+from horizon_mpc.locomotion.settings import MAX_COMMAND_NORM, Weights
 from horizon_mpc.nodes.declare import declare, float_range, int_range
 
-__all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MODEL_PARAMETERS",
-           "MODEL_PARAMETER_DECLARATIONS", "WEIGHT_FIELDS", "MpcParameters", "gait_warnings",
-           "parameter_names", "parameter_table", "timing_warnings"]
+__all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MIN_DUTY_FACTOR",
+           "MODEL_PARAMETERS", "MODEL_PARAMETER_DECLARATIONS", "WEIGHT_FIELDS", "MpcParameters",
+           "gait_warnings", "parameter_names", "parameter_table", "timing_warnings"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
@@ -45,6 +45,7 @@ MODEL_PARAMETERS = tuple(d[0] for d in MODEL_PARAMETER_DECLARATIONS)
 # Hz of the node clock: a status every fifth 50 Hz tick (diagnostic tools poll at ~1 Hz);
 # its values summarise the ticks in between (solve_time_max_ms, ticks, deadline_misses)
 DIAGNOSTICS_RATE = 10.0
+MIN_DUTY_FACTOR = 0.05  # the smallest duty_factor accepted (0 stands for the gait's own)
 
 
 # where the walking MPC was seen to walk and to fall (go2, lockstep, forward 0.3 m/s and a
@@ -153,7 +154,7 @@ class MpcParameters:
           "command's norm with each axis divided by its limit (max_vx, max_vy, max_wz) is at "
           "most this, a command beyond is scaled down along its direction (1.414: two axes at "
           "their limits together; >= 1.733: per-axis limits only); live",
-          float_range(0.01, 2.0))
+          float_range(0.01, MAX_COMMAND_NORM))
         for name in WEIGHT_FIELDS:
             value = getattr(st.weights, name)
             value = [float(x) for x in value] if isinstance(value, list) else float(value)
@@ -212,9 +213,10 @@ class MpcParameters:
         st = self.mpc.settings
         if any(n in new for n in LIVE_GAIT):
             g = {n: new.get(n, self._p(n)) for n in LIVE_GAIT}
-            if 0.0 < g["duty_factor"] < 0.05:
+            if 0.0 < g["duty_factor"] < MIN_DUTY_FACTOR:
                 return SetParametersResult(successful=False, reason=(
-                    f"duty_factor {g['duty_factor']} is below 0.05 (0: the gait's own)"))
+                    f"duty_factor {g['duty_factor']} is below {MIN_DUTY_FACTOR} (0: the "
+                    "gait's own)"))
             try:
                 self.mpc.set_gait(g["gait"], g["step_duration"], g["step_height"],
                                   g["duty_factor"] or None)

@@ -97,8 +97,7 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
             return 1
         if stop.is_set():  # a signal while the node was being built
             return 0
-        for note in unmatched_params_file_sections(argv, node.get_name(),
-                                                   node.get_fully_qualified_name()):
+        for note in unmatched_params_file_sections(argv, node.get_fully_qualified_name()):
             log.warning(note)
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok():
@@ -115,9 +114,9 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
     return 0
 
 
-def unmatched_params_file_sections(argv: Sequence[str], name: str, fqn: str) -> list[str]:
+def unmatched_params_file_sections(argv: Sequence[str], fqn: str) -> list[str]:
     """Notes on the sections of the ``--params-file`` files in ``argv`` that set parameters
-    of no node called ``name`` (fully qualified ``fqn``): rcl ignores them without a word
+    of no node named ``fqn`` (fully qualified): rcl ignores them without a word
     (a file keyed ``mpc_node:`` for the node ``mpc``). Wildcards (``/**``, ``*``) match as
     in rcl; an unreadable file is rcl's to report."""
     notes = []
@@ -129,7 +128,7 @@ def unmatched_params_file_sections(argv: Sequence[str], name: str, fqn: str) -> 
                 data = yaml.safe_load(fh)
         except (OSError, yaml.YAMLError):
             continue
-        keys = [k for k in _node_keys(data, []) if not _matches(k, name, fqn)]
+        keys = [k for k in _node_keys(data, []) if not _matches(k, fqn)]
         if keys:
             notes.append(f"--params-file {path}: section(s) {keys} match no node here (this "
                          f"node is {fqn}): their parameters are not applied")
@@ -145,12 +144,13 @@ def _node_keys(data: object, prefix: list[str]) -> list[str]:
     return [k for key, value in data.items() for k in _node_keys(value, [*prefix, str(key)])]
 
 
-def _matches(key: str, name: str, fqn: str) -> bool:
-    """Whether an rcl parameters-file node key matches the node: ``**`` stands for any
+def _matches(key: str, fqn: str) -> bool:
+    """Whether an rcl parameters-file node key matches the node's fully qualified name (a
+    key without a leading slash is taken from the root, as rcl does): ``**`` stands for any
     namespaces (none included), ``*`` for one name or part of one."""
     regex = "".join("(?:/[^/]+)*" if part == "**" else "/" + re.escape(part).replace(
         r"\*", "[^/]*") for part in key.split("/") if part)
-    return bool(re.fullmatch(regex, fqn) or re.fullmatch(regex, "/" + name))
+    return bool(re.fullmatch(regex, fqn))
 
 
 def _plain_arguments(args: Sequence[str]) -> list[str]:

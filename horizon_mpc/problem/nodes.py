@@ -5,8 +5,8 @@ Nodes are numbered 0..N (``N = n_nodes``, the number of intervals). States live 
 or integer array, a ``range``, a ``slice``, a boolean mask (array or list) with one entry
 per node the object lives on, or None (= every node the object lives on). A bool alone or a
 non-integer number is refused. Per-node values (a ``(dim, n_sel)`` array) go to the nodes in
-the order they are listed (``nodes=[8, 3]``: column 0 to node 8); a node listed twice is
-refused there.
+the order they are listed (``nodes=[8, 3]``: column 0 to node 8); a list naming a node
+twice is the sorted set of its nodes (a scalar or ``(dim,)`` value then fills them).
 """
 
 from __future__ import annotations
@@ -24,12 +24,12 @@ def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "",
                  ordered: bool = False) -> np.ndarray:
     """Node indices of a selection, validated against ``0..n_valid-1``: sorted and unique,
     or with ``ordered`` (a selection that per-node values are written to: column j of a
-    ``(dim, n_sel)`` value goes to the j-th node listed) in the caller's order.
+    ``(dim, n_sel)`` value goes to the j-th node listed) in the caller's order; a selection
+    that names a node twice is its sorted set either way.
 
     Raises:
         IndexError: a node is out of range (the message names ``what`` and the valid range).
         TypeError: the selection has an unsupported type.
-        ValueError: ``ordered`` and a node listed twice (which value would it get?).
     """
     if nodes is None:
         return np.arange(n_valid)
@@ -62,12 +62,11 @@ def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "",
         raise IndexError(f"nodes {bad.tolist()} out of range for {what}: valid nodes are "
                          f"0..{n_valid - 1}")
     if idx.size > 1 and np.any(idx[1:] <= idx[:-1]):
-        unique, counts = np.unique(idx, return_counts=True)
-        if not ordered:
+        unique = np.unique(idx)
+        if not ordered or unique.size < idx.size:
+            # a node listed twice: the set of nodes (a per-node value must then have a column
+            # per node of the set, and the shape check says so)
             return unique
-        if np.any(counts > 1):
-            raise ValueError(f"nodes of {what}: node(s) {unique[counts > 1].tolist()} listed "
-                             "more than once")
     return idx
 
 
