@@ -1224,3 +1224,31 @@ def test_a_duty_factor_below_the_minimum_is_refused_at_start_up_too(context, wal
     finally:
         walking_mpc.settings.max_command_norm = math.sqrt(2)
         node.destroy_node()
+
+
+def test_a_stopped_simulator_is_reported_on_the_wall_clock(context, walking_mpc):
+    """sim_node is also the clock: when it stops, sim time stops and no timer tick can see
+    the states age; the steady-clock watchdog says so (the node went silent before)."""
+    node = sim_time_node(context, walking_mpc, diagnostics_rate=0.0)
+    try:
+        drive_in_sim_time(node, 3)
+        skips = node.stale_skips
+        node._check_progress()  # states came since the last look: nothing to say
+        assert node.stale_skips == skips
+        node._check_progress()  # none since: stale
+        assert node.stale_skips == skips + 1
+        status = node._pub_diag.msgs[-1].status[0]
+        assert status.level == DiagnosticStatus.WARN and "stale" in status.message
+    finally:
+        node.destroy_node()
+
+
+def test_use_sim_time_outside_ros_args_is_no_parameter():
+    """'-p use_sim_time:=false' before --ros-args is ignored by rcl (warned about as a plain
+    argument) and must not switch the sim-time default off either."""
+    from horizon_mpc.nodes.mpc_node import with_sim_time_default
+
+    assert with_sim_time_default(["mpc_node", "-p", "use_sim_time:=false"])[-1] == \
+        "use_sim_time:=true"
+    argv = ["mpc_node", "--ros-args", "-p", "use_sim_time:=false"]
+    assert with_sim_time_default(argv) == argv

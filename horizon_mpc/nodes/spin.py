@@ -19,7 +19,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-__all__ = ["forward_library_warnings", "spin_until_signal"]
+__all__ = ["forward_library_warnings", "ros_arguments", "spin_until_signal",
+           "unmatched_params_file_sections"]
 
 
 # what a node's construction raises on bad parameters or files: one line, no traceback
@@ -153,17 +154,28 @@ def _matches(key: str, fqn: str) -> bool:
     return bool(re.fullmatch(regex, fqn))
 
 
-def _plain_arguments(args: Sequence[str]) -> list[str]:
-    """The arguments outside ``--ros-args ... [--]`` blocks (the program name left out)."""
-    out, in_ros = [], False
+def _split_arguments(args: Sequence[str]) -> tuple[list[str], list[str]]:
+    """``(plain, ros)``: the arguments outside and inside ``--ros-args ... [--]`` blocks
+    (the flags themselves in neither)."""
+    plain, ros, in_ros = [], [], False
     for a in args:
         if a == "--ros-args":
             in_ros = True
         elif in_ros and a == "--":
             in_ros = False
-        elif not in_ros:
-            out.append(a)
-    return out
+        else:
+            (ros if in_ros else plain).append(a)
+    return plain, ros
+
+
+def _plain_arguments(args: Sequence[str]) -> list[str]:
+    """The arguments outside ``--ros-args ... [--]`` blocks (the program name left out)."""
+    return _split_arguments(args)[0]
+
+
+def ros_arguments(argv: Sequence[str]) -> list[str]:
+    """The arguments inside the ``--ros-args ... [--]`` blocks of ``argv`` (program first)."""
+    return _split_arguments(list(argv)[1:])[1]
 
 
 class _StartupInterrupted(BaseException):
