@@ -40,6 +40,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,12 +53,14 @@ __all__ = [
     "CC_ARGV",
     "CompileStats",
     "arch_flags",
+    "build_shared_library",
     "codegen_enabled",
     "compile_function",
     "compiled_library",
     "default_cache_dir",
     "forget_loaded",
     "function_name",
+    "library_damage",
 ]
 
 _log = logging.getLogger(__name__)
@@ -228,7 +231,7 @@ def compile_function(
         return _LOADED[str(lib)]
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        damage = _damage(lib) if lib.is_file() else None
+        damage = library_damage(lib) if lib.is_file() else None
         if damage:
             _log.warning("cached library %s is damaged (%s): rebuilding it", lib, damage)
             lib.unlink(missing_ok=True)
@@ -267,7 +270,7 @@ def _warn_uncompiled(reason: str) -> None:
                      "folder, or HORIZON_MPC_NO_CODEGEN=1 to silence this", reason, CC)
 
 
-def _damage(lib: Path) -> str | None:
+def library_damage(lib: Path) -> str | None:
     """Why the shared library file ``lib`` cannot be a complete one, or None. ELF (Linux):
     the magic number and the section header table, which the linker writes last, inside the
     file; elsewhere only emptiness is checked."""
@@ -311,30 +314,47 @@ def forget_loaded() -> None:
 
 
 def _build(fn: ca.Function, lib: Path) -> None:
-    if shutil.which(CC_ARGV[0]) is None:  # before generating the C (hundreds of kB)
-        raise FileNotFoundError(f"C compiler {CC_ARGV[0]!r} not found on PATH")
-    _remove_stale_builds(lib.parent)
-    work = Path(tempfile.mkdtemp(prefix=".build_", dir=lib.parent))
-    try:
+    def generate(work: Path) -> list[str]:
         c_name = f"{fn.name()}.c"
         gen = ca.CodeGenerator(c_name, {"with_header": False})
         gen.add(fn)
         gen.generate(str(work) + os.sep)
-        c_file = work / c_name
-        size = c_file.stat().st_size
+        size = (work / c_name).stat().st_size
         opt = (*_opt_flags(size), *arch_flags())
         _log.info("compiling %s (%d kB of C, %s)...", fn.name(), size // 1000, " ".join(opt))
-        start = time.perf_counter()
+        return [*opt, *_FLAGS, str(work / c_name)]
+
+    start = time.perf_counter()
+    build_shared_library(lib, generate, fn.name())
+    STATS.compiled += 1
+    _log.info("compiled %s in %.1f s -> %s", fn.name(), time.perf_counter() - start, lib)
+
+
+def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
+                         what: str) -> None:
+    """Build the shared library ``lib`` with the C compiler (:data:`CC_ARGV`) in a
+    temporary folder next to it, then rename it into place (atomic: readers never see a
+    partial file). ``compiler_args(work)`` gives the arguments between the compiler and
+    ``-o`` (flags, sources) and may write the sources into ``work`` first. The compiler runs
+    in a process group that dies with this process; build folders that a killed process
+    left behind are removed.
+
+    Raises:
+        FileNotFoundError: no C compiler (checked before ``compiler_args`` runs).
+        RuntimeError: the compiler failed (the message ends with its output).
+    """
+    if shutil.which(CC_ARGV[0]) is None:
+        raise FileNotFoundError(f"C compiler {CC_ARGV[0]!r} not found on PATH")
+    lib.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_builds(lib.parent)
+    work = Path(tempfile.mkdtemp(prefix=".build_", dir=lib.parent))
+    try:
         tmp_lib = work / lib.name
-        cmd = [*CC_ARGV, *opt, *_FLAGS, str(c_file), "-o", str(tmp_lib), "-lm"]
+        cmd = [*CC_ARGV, *compiler_args(work), "-o", str(tmp_lib), "-lm"]
         returncode, stderr = _run_compiler(cmd)
         if returncode != 0:
-            raise RuntimeError(
-                f"compiling {fn.name()} failed ({' '.join(cmd)}):\n{stderr[-2000:]}"
-            )
+            raise RuntimeError(f"compiling {what} failed ({' '.join(cmd)}):\n{stderr[-2000:]}")
         os.replace(tmp_lib, lib)  # atomic within one file system
-        STATS.compiled += 1
-        _log.info("compiled %s in %.1f s -> %s", fn.name(), time.perf_counter() - start, lib)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

@@ -241,7 +241,7 @@ def test_a_damaged_cached_library_is_rebuilt_not_loaded(cache, damage, caplog):
     x = np.linspace(0.1, 0.9, fn.size1_in(0))
     for got, want in zip(again(x, 2.0), fn(x, 2.0), strict=True):
         np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-12)
-    assert lib.read_bytes() != b"" and codegen._damage(lib) is None
+    assert lib.read_bytes() != b"" and codegen.library_damage(lib) is None
 
 
 def test_without_a_compiler_or_a_writable_cache_the_function_runs_uncompiled(

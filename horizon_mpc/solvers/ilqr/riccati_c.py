@@ -32,8 +32,6 @@ import math
 import os
 import platform
 import shutil
-import subprocess
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -90,23 +88,12 @@ def library_path() -> Path:
 
 
 def _build(lib: Path) -> None:
-    """Compile the sources to ``lib`` (under a temporary name, then an atomic rename)."""
-    lib.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=".build_riccati_", dir=lib.parent))
-    try:
-        tmp = work / lib.name
-        cmd = [*codegen.CC_ARGV, *FLAGS, *map(str, SOURCES), "-o", str(tmp), "-lm"]
-        _log.info("compiling %s ...", ", ".join(path.name for path in SOURCES))
-        start = time.perf_counter()
-        res = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        if res.returncode != 0:
-            raise RuntimeError(f"compiling {SOURCE.parent} failed ({' '.join(cmd)}):\n"
-                               f"{res.stderr[-2000:]}")
-        os.replace(tmp, lib)
-        _log.info("compiled the Riccati library in %.1f s -> %s", time.perf_counter() - start,
-                  lib)
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
+    """Compile the sources to ``lib`` (:func:`horizon_mpc.codegen.build_shared_library`)."""
+    _log.info("compiling %s ...", ", ".join(path.name for path in SOURCES))
+    start = time.perf_counter()
+    codegen.build_shared_library(lib, lambda _work: [*FLAGS, *map(str, SOURCES)],
+                                 str(SOURCE.parent))
+    _log.info("compiled the Riccati library in %.1f s -> %s", time.perf_counter() - start, lib)
 
 
 def _report(reason: str, level: int) -> None:
@@ -130,6 +117,10 @@ def _load() -> ctypes.CDLL:
                 raise RuntimeError(f"no C compiler: {codegen.CC_ARGV[0]!r} is not on PATH "
                                    "(set $CC)")
             lib = library_path()
+            damage = codegen.library_damage(lib) if lib.is_file() else None
+            if damage:  # loading a truncated library is a SIGBUS, not an OSError
+                _log.warning("cached library %s is damaged (%s): rebuilding it", lib, damage)
+                lib.unlink(missing_ok=True)
             if not lib.is_file():
                 _build(lib)
             try:
