@@ -29,9 +29,14 @@ class Gait:
     step_height: float
 
     @property
+    def stands(self) -> bool:
+        """Whether the gait never lifts a foot (``stand``, or a duty factor of 1)."""
+        return self.duty_factor >= 1.0
+
+    @property
     def period(self) -> float:
         """Duration of one gait cycle (s)."""
-        return self.step_duration / (1.0 - self.duty_factor) if self.duty_factor < 1 else np.inf
+        return np.inf if self.stands else self.step_duration / (1.0 - self.duty_factor)
 
     def phases(self, t: np.ndarray) -> np.ndarray:
         """Phase in [0, 1) of each foot at times ``t``: shape (n_feet, len(t))."""
@@ -44,7 +49,7 @@ class Gait:
         """Contacts and swing progress on nodes ``t0 + k dt``, k = 0..n_nodes."""
         t = t0 + dt * np.arange(n_nodes + 1)
         ph = self.phases(t)
-        stance = ph < self.duty_factor if self.duty_factor < 1 else np.ones_like(ph, bool)
+        stance = np.ones_like(ph, bool) if self.stands else ph < self.duty_factor
         swing_progress = np.where(stance, 0.0,
                                   (ph - self.duty_factor) / max(1.0 - self.duty_factor, 1e-9))
         return ContactSchedule(stance, swing_progress, self.step_height)

@@ -443,7 +443,7 @@ class WalkingMpc:
         # three numbers: plain floats (numpy's per-call overhead was ~50 us a tick here)
         target = limit_command([c if math.isfinite(c) else 0.0 for c in cmd],
                                st.max_velocity, st.max_command_norm)
-        if self.scheduler.gait.duty_factor >= 1.0:
+        if self.scheduler.gait.stands:
             # a gait that never lifts a foot (stand): the command cannot be walked; moving
             # the base on planted feet slid them (34 deg of yaw, feet dragged 2 cm)
             target = (0.0, 0.0, 0.0)

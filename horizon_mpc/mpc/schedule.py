@@ -34,20 +34,18 @@ class GaitScheduler:
         """Standing, no walk in progress (a pending gait is taken now)."""
         if self.pending is not None:
             self.gait, self.pending = self.pending, None
-        self.t_start: float | None = (None if self.stand_when_idle or self.gait.name == "stand"
-                                      else t)
+        self.t_start: float | None = None if self.stand_when_idle or self.gait.stands else t
         self.t_stop: float | None = None
 
     def set_gait(self, gait: Gait, t: float) -> None:
         """Walk with ``gait`` from time ``t`` on, without a jump of the contacts (see the
         module docstring)."""
-        walking = self.t_start is not None and self.gait.name != "stand"
-        if not walking:
+        if not self.walking:
             self.gait, self.pending = gait, None
-            if gait.name == "stand":
+            if gait.stands:
                 self.t_start = self.t_stop = None
             return
-        if (self.pending is None and self.t_stop is None and gait.name != "stand"
+        if (self.pending is None and self.t_stop is None and not gait.stands
                 and (gait.offsets, gait.duty_factor) == (self.gait.offsets,
                                                          self.gait.duty_factor)):
             # the same pattern at another pace: keep the phase of the cycle
@@ -63,16 +61,20 @@ class GaitScheduler:
     @property
     def walking(self) -> bool:
         """True between a start and the end of the last swing after a stop."""
-        return self.t_start is not None
+        return self.t_start is not None and not self.gait.stands
+
+    def _swings_ended(self, t: float) -> bool:
+        """Whether the swings in progress at the stop (``t_stop``) have ended by ``t``."""
+        return t - self.t_stop > self.gait.step_duration + 1e-9
 
     def command(self, t: float, moving: bool) -> None:
         """Tell the scheduler whether the robot is commanded to move at time ``t``."""
         if self.pending is not None:
-            if self.t_start is not None and t - self.t_stop <= self.gait.step_duration + 1e-9:
+            if self.t_start is not None and not self._swings_ended(t):
                 return  # the old gait's swings are ending
             self.gait, self.pending = self.pending, None
             self.t_start = self.t_stop = None
-        if self.gait.name == "stand":
+        if self.gait.stands:
             return
         if not self.stand_when_idle:
             if self.t_start is None:
@@ -84,14 +86,14 @@ class GaitScheduler:
             self.t_stop = None
         elif self.t_start is not None and self.t_stop is None:
             self.t_stop = t
-        if self.t_stop is not None and t - self.t_stop > self.gait.step_duration + 1e-9:
+        if self.t_stop is not None and self._swings_ended(t):
             self.t_start = self.t_stop = None
 
     def schedule(self, t0: float, n_nodes: int, dt: float) -> ContactSchedule:
         """The contact schedule on nodes ``t0 + k dt``, k = 0..n_nodes."""
         g = self.gait
         n_feet = len(g.offsets)
-        if self.t_start is None or g.name == "stand":
+        if self.t_start is None or g.stands:
             return ContactSchedule(np.ones((n_feet, n_nodes + 1), bool),
                                    np.zeros((n_feet, n_nodes + 1)), g.step_height)
         sched = g.schedule(t0 - self.t_start, n_nodes, dt)

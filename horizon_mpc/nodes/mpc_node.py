@@ -325,7 +325,7 @@ class MpcNode(MpcParameters, Node):
             self.rejected["cmd_vel"] += 1
             self._warn("cmd_vel", f"rejected cmd_vel: {exc}; keeping the previous command")
             return
-        if self.mpc.scheduler.gait.duty_factor >= 1.0 and np.any(cmd != 0.0):
+        if self.mpc.scheduler.gait.stands and np.any(cmd != 0.0):
             notes.append(f"gait {self.mpc.settings.gait.name!r} never lifts a foot: cmd_vel "
                          "is not followed (the robot stands)")
         for note in notes:
