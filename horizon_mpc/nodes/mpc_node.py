@@ -53,9 +53,9 @@ from horizon_mpc.nodes.mpc_outputs import (
 )
 from horizon_mpc.nodes.mpc_parameters import (
     LIVE_LIMITS,
-    MIN_DUTY_FACTOR,
     MODEL_PARAMETER_DECLARATIONS,
     MpcParameters,
+    gait_duty_factor,
     gait_warnings,
     parameter_table,
     timing_warnings,
@@ -101,10 +101,7 @@ class MpcNode(MpcParameters, Node):
         if mpc is not None and horizon != (settings.n_nodes, settings.dt):
             raise ValueError(f"n_nodes/dt {horizon} differ from those of the given MPC "
                              f"({settings.n_nodes}, {settings.dt}): build it with them")
-        duty = self._p("duty_factor") or None
-        if duty is not None and duty < MIN_DUTY_FACTOR:
-            raise ValueError(f"duty_factor {duty} is below {MIN_DUTY_FACTOR} (0: the gait's "
-                             "own)")
+        duty = gait_duty_factor(self._p("duty_factor"))
         settings.n_nodes, settings.dt = horizon
         g = settings.gait
         g.name, g.step_duration = self._p("gait"), self._p("step_duration")
@@ -209,6 +206,8 @@ class MpcNode(MpcParameters, Node):
         self._period_ns = round(self.period * NS_PER_S)
         self._prepared_ns = 0  # the tick time (node clock, ns) the preparation is for
         self._recent_misses: deque[bool] = deque(maxlen=50)  # prepare misses of recent ticks
+        # N: a plan's constraint violation beyond which its status is WARN (INFEASIBLE_PLAN)
+        self._infeasible_violation = INFEASIBLE_PLAN * mpc.model.mass * 9.81
         self.last_state_age = math.nan
         self._last_warn: dict[str, float] = {}
         self._suppressed: dict[str, int] = {}
@@ -249,6 +248,17 @@ class MpcNode(MpcParameters, Node):
         self._last_warn[kind] = wall
         self.get_logger().warning(text + (f" ({n} similar warnings suppressed)" if n else ""))
 
+    def _skip_stale(self, age: float, kind: str, text: str, stamp_ns: int,
+                    now_ns: int) -> bool:
+        """Not planning from a state ``age`` s old (negative: stamped ahead of the clock):
+        counted in ``stale_skips``, warned about (``kind``, throttled), WARN diagnostics.
+        Returns False (no trajectory published)."""
+        self.last_state_age = age
+        self.stale_skips += 1
+        self._warn(kind, text)
+        self._publish_diagnostics(None, stamp_ns, now_ns)
+        return False
+
     def _check_progress(self) -> None:
         """Explain (throttled) why states keep arriving while no tick happens, or say that
         they stopped (wall clock: a stopped simulator stops the sim clock as well)."""
@@ -258,11 +268,10 @@ class MpcNode(MpcParameters, Node):
         if self._states_in == prev_states and self.plan is not None:
             # no state for a whole watch period, on the wall clock: with a simulator that
             # stopped, the sim clock stopped too and no timer tick can see the states age
-            self.stale_skips += 1
-            self.last_state_age = math.inf
-            self._warn("stale", f"no joint_states / odom for {_WATCH_PERIOD:g} s (wall clock): "
-                       "not planning; the last trajectory sent is the robot's last plan")
-            self._publish_diagnostics(None, self._last_tick_stamp or 0, clock_ns)
+            self._skip_stale(math.inf, "stale", f"no joint_states / odom for "
+                             f"{_WATCH_PERIOD:g} s (wall clock): not planning; the last "
+                             "trajectory sent is the robot's last plan",
+                             self._last_tick_stamp or 0, clock_ns)
             return
         if self._states_in == prev_states or ticks > prev_ticks:
             return
@@ -379,12 +388,9 @@ class MpcNode(MpcParameters, Node):
             # (a timer tick): then say so, as for a stale state that arrives
             age = (now_ns - stamp_ns) / NS_PER_S
             if age > self.state_timeout:
-                self.last_state_age = age
-                self.stale_skips += 1
-                self._warn("stale", f"no new state for {age:.3f} s (state_timeout "
-                           f"{self.state_timeout:g} s): not planning; the last trajectory "
-                           "sent is the robot's last plan")
-                self._publish_diagnostics(None, stamp_ns, now_ns)
+                self._skip_stale(age, "stale", f"no new state for {age:.3f} s (state_timeout "
+                                 f"{self.state_timeout:g} s): not planning; the last "
+                                 "trajectory sent is the robot's last plan", stamp_ns, now_ns)
             return False
         t = stamp_ns / NS_PER_S
         if self._last_tick_stamp is not None and stamp_ns < self._last_tick_stamp \
@@ -394,19 +400,18 @@ class MpcNode(MpcParameters, Node):
             self._warn("order", f"a state stamped {(self._last_tick_stamp - stamp_ns) / 1e6:.1f}"
                        " ms before the one the last plan was made from: not planning from it")
             return False
-        self.last_state_age = now_ns / NS_PER_S - t
-        if abs(self.last_state_age) > self.state_timeout:
-            self.stale_skips += 1
-            if self.last_state_age > 0:
-                self._warn("stale", f"the state is {self.last_state_age:.3f} s old "
-                           f"(state_timeout {self.state_timeout:g} s); not planning")
-            else:  # stamped ahead of the node's clock: clocks that do not match
-                self._warn("future", f"the state is stamped {-self.last_state_age:.3f} s "
-                           "ahead of the node's clock (more than state_timeout "
-                           f"{self.state_timeout:g} s): not planning; do the publisher and "
-                           "this node use the same clock (use_sim_time)?")
-            self._publish_diagnostics(None, stamp_ns, now_ns)
-            return False
+        age = now_ns / NS_PER_S - t
+        self.last_state_age = age
+        if age > self.state_timeout:
+            return self._skip_stale(age, "stale", f"the state is {age:.3f} s old "
+                                    f"(state_timeout {self.state_timeout:g} s); not planning",
+                                    stamp_ns, now_ns)
+        if -age > self.state_timeout:  # stamped ahead of the node's clock: clocks differ
+            return self._skip_stale(age, "future", f"the state is stamped {-age:.3f} s ahead "
+                                    "of the node's clock (more than state_timeout "
+                                    f"{self.state_timeout:g} s): not planning; do the "
+                                    "publisher and this node use the same clock "
+                                    "(use_sim_time)?", stamp_ns, now_ns)
         _, qj, vj = joints
         _, pos, quat, lin, ang = base
         q = np.concatenate((pos, quat, qj))
@@ -506,7 +511,7 @@ class MpcNode(MpcParameters, Node):
             message = "ok" if ok else (f"solver failure ({stats.get('status')}): "
                                        "standing fallback")
             violation = stats.get("constraint_violation", 0.0)
-            limit = INFEASIBLE_PLAN * self.mpc.model.mass * 9.81
+            limit = self._infeasible_violation
             if ok and violation > limit:
                 level = DiagnosticStatus.WARN
                 message = (f"plan far from feasible (constraint violation {violation:.3g} > "

@@ -26,7 +26,8 @@ from horizon_mpc.nodes.declare import declare, float_range, int_range
 
 __all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MIN_DUTY_FACTOR",
            "MODEL_PARAMETERS", "MODEL_PARAMETER_DECLARATIONS", "WEIGHT_FIELDS", "MpcParameters",
-           "gait_warnings", "parameter_names", "parameter_table", "timing_warnings"]
+           "gait_duty_factor", "gait_warnings", "parameter_names", "parameter_table",
+           "timing_warnings"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
@@ -55,6 +56,17 @@ WALKED_DT = (0.01, 0.035)  # s; 0.04 fell
 # session 20); 12 fell
 WALKED_MIN_NODES = 20
 WALKED_MAX_NODES_PER_TICK = 5  # 10 Hz at dt 0.02 walked; 5 Hz (10 nodes a tick) fell
+
+
+def gait_duty_factor(value: float) -> float | None:
+    """The ``duty_factor`` parameter as a gait's duty factor: 0 is None (the gait's own).
+
+    Raises:
+        ValueError: a value in (0, MIN_DUTY_FACTOR).
+    """
+    if value and value < MIN_DUTY_FACTOR:
+        raise ValueError(f"duty_factor {value} is below {MIN_DUTY_FACTOR} (0: the gait's own)")
+    return float(value) or None
 
 
 def gait_warnings(gait: str) -> list[str]:
@@ -213,13 +225,9 @@ class MpcParameters:
         st = self.mpc.settings
         if any(n in new for n in LIVE_GAIT):
             g = {n: new.get(n, self._p(n)) for n in LIVE_GAIT}
-            if 0.0 < g["duty_factor"] < MIN_DUTY_FACTOR:
-                return SetParametersResult(successful=False, reason=(
-                    f"duty_factor {g['duty_factor']} is below {MIN_DUTY_FACTOR} (0: the "
-                    "gait's own)"))
             try:
                 self.mpc.set_gait(g["gait"], g["step_duration"], g["step_height"],
-                                  g["duty_factor"] or None)
+                                  gait_duty_factor(g["duty_factor"]))
             except ValueError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         if any(n in new for n in LIVE_LIMITS):
