@@ -61,7 +61,7 @@ from horizon_mpc.nodes.mpc_parameters import (
     timing_warnings,
 )
 from horizon_mpc.nodes.robot_description import check_urdf_text
-from horizon_mpc.nodes.spin import ros_arguments, spin_until_signal
+from horizon_mpc.nodes.spin import spin_until_signal, split_arguments
 
 __all__ = ["MpcNode", "main", "robot_model"]
 
@@ -581,7 +581,7 @@ def with_sim_time_default(argv: Sequence[str]) -> list[str]:
     clock. On a robot, pass ``--ros-args -p use_sim_time:=false``.
     """
     argv = list(argv)
-    ros = ros_arguments(argv)  # outside --ros-args, `-p use_sim_time:=false` is no parameter
+    ros = split_arguments(argv)[1]  # outside --ros-args, `-p use_sim_time:=false` is none
     if any(re.search(r"(^|:)use_sim_time:=", a) for a in ros) or any(
             _sets_use_sim_time(path) for flag, path in itertools.pairwise(ros)
             if flag == "--params-file"):

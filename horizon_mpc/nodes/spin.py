@@ -19,7 +19,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-__all__ = ["forward_library_warnings", "ros_arguments", "spin_until_signal",
+__all__ = ["forward_library_warnings", "spin_until_signal", "split_arguments",
            "unmatched_params_file_sections"]
 
 
@@ -48,7 +48,7 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
     the context down under a running executor, which can surface as an RCLError).
     """
     argv = list(sys.argv if args is None else args)
-    plain = _plain_arguments(argv[1:])
+    plain = split_arguments(argv)[0]
     if usage is not None and ({"-h", "--help"} & set(plain)):
         sys.stdout.write((usage() if callable(usage) else usage).rstrip("\n") + "\n")
         return 0
@@ -154,11 +154,11 @@ def _matches(key: str, fqn: str) -> bool:
     return bool(re.fullmatch(regex, fqn))
 
 
-def _split_arguments(args: Sequence[str]) -> tuple[list[str], list[str]]:
-    """``(plain, ros)``: the arguments outside and inside ``--ros-args ... [--]`` blocks
-    (the flags themselves in neither)."""
+def split_arguments(argv: Sequence[str]) -> tuple[list[str], list[str]]:
+    """``(plain, ros)``: the arguments of ``argv`` (the program first, left out) outside and
+    inside its ``--ros-args ... [--]`` blocks (the flags themselves in neither)."""
     plain, ros, in_ros = [], [], False
-    for a in args:
+    for a in list(argv)[1:]:
         if a == "--ros-args":
             in_ros = True
         elif in_ros and a == "--":
@@ -166,16 +166,6 @@ def _split_arguments(args: Sequence[str]) -> tuple[list[str], list[str]]:
         else:
             (ros if in_ros else plain).append(a)
     return plain, ros
-
-
-def _plain_arguments(args: Sequence[str]) -> list[str]:
-    """The arguments outside ``--ros-args ... [--]`` blocks (the program name left out)."""
-    return _split_arguments(args)[0]
-
-
-def ros_arguments(argv: Sequence[str]) -> list[str]:
-    """The arguments inside the ``--ros-args ... [--]`` blocks of ``argv`` (program first)."""
-    return _split_arguments(list(argv)[1:])[1]
 
 
 class _StartupInterrupted(BaseException):
