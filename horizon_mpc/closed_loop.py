@@ -288,7 +288,7 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
         except ValueError as exc:  # a -p value mpc_node refuses (an unknown gait, ...)
             raise MpcSettingError(str(exc)) from exc
         rec.build_time = time.perf_counter() - t_build
-        dt = mpc.mpc.settings.dt
+        dt = mpc.period  # its control period: 1 / control_rate, else the node dt
         sim = SimNode(context=ctx, parameter_overrides=[
             Parameter("robot", value=robot), Parameter("lockstep", value=True),
             Parameter("control_period", value=dt), Parameter("lockstep_timeout", value=10.0),

@@ -620,6 +620,17 @@ def test_the_control_period_is_the_nodes(tmp_path):
     assert control_period("go2", {"dt": 0.03, "control_rate": 25.0}) == pytest.approx(0.04)
 
 
+def test_the_lockstep_loop_steps_at_the_nodes_control_rate():
+    """Lockstep stepped the simulator by the node dt whatever control_rate said: with -p
+    control_rate=100 every tick was a prepare miss (states 20 ms apart for ticks prepared
+    10 ms ahead)."""
+    segs = [Segment(0.5)]
+    rec = run("go2", segs, mode="lockstep", gif=False, mpc_parameters={"control_rate": 25.0})
+    summary = summarise(rec, segs, robot="go2")
+    assert summary["ticks_per_sim_second"] == pytest.approx(25, rel=1e-9)
+    assert summary["periods_without_tick_percent"] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_an_interrupted_run_writes_what_it_has_and_exits_130(tmp_path, monkeypatch, caplog):
     """Ctrl-C (or SIGTERM, which the CLI turns into the same) printed a traceback and left
     an empty output folder."""

@@ -93,6 +93,18 @@ def test_foreign_symbols_in_a_term_are_refused(prb):
         prb.create_cost("c", cs.SX.sym("alien"))
 
 
+def test_another_problems_variable_of_the_same_name_is_refused(prb):
+    """Symbols were matched by name: another problem's ``x`` passed here and make_solver
+    then failed inside CasADi ("variables [x_0, x_1] are free"), naming no term."""
+    other = Problem(prb.n_nodes)
+    x_other = other.create_state_variable("x", prb.get_variable("x").dim)
+    with pytest.raises(ValueError, match=r"not variables of this problem.*\['x_0'"):
+        prb.create_final_constraint("goal", x_other - 1.0)
+    with pytest.raises(ValueError, match="not variables of this problem"):
+        prb.create_cost("c", x_other[0] + prb.get_variable("x")[0])
+    prb.create_cost("ok", prb.get_variable("x"))  # its own x still is
+
+
 def test_unknown_transcription_and_integrator_list_the_choices(prb):
     with pytest.raises(ValueError, match="unknown transcription 'shooting'"):
         prb.transcribe("shooting")

@@ -340,16 +340,19 @@ class Problem:
                              "set the dynamics again")
 
     # ------------------------------------------------------------------ terms
-    def _known_symbols(self, allow_offsets: bool) -> dict[str, str]:
+    def _known_symbols(self, allow_offsets: bool) -> dict[int, str]:
+        """The problem's scalar symbols by identity (``element_hash``), not by name: a
+        variable of another problem with the same name is another symbol (it passed here
+        and failed later inside CasADi, naming no term)."""
         known = {}
         groups: Iterable = [*self.states, *self.inputs, *self.singles, *self.parameters]
         for v in groups:
             for i in range(v.dim):
-                known[v[i].name()] = v.name
+                known[v[i].element_hash()] = v.name
             if allow_offsets and isinstance(v, (StateVariable, InputVariable)):
                 for k, off in v._offsets.items():
                     for i in range(v.dim):
-                        known[off[i].name()] = f"{v.name}.offset({k})"
+                        known[off[i].element_hash()] = f"{v.name}.offset({k})"
         return known
 
     @staticmethod
@@ -373,10 +376,11 @@ class Problem:
 
     def _check_symbols(self, expr: cs.SX, what: str, allow_offsets: bool = True) -> None:
         known = self._known_symbols(allow_offsets)
-        unknown = [s.name() for s in cs.symvar(expr) if s.name() not in known]
+        unknown = [s.name() for s in cs.symvar(expr) if s.element_hash() not in known]
         if unknown:
             raise ValueError(f"{what}: the expression uses symbols that are not variables of "
-                             f"this problem: {unknown[:5]}")
+                             f"this problem (another problem's, or free symbols; a name "
+                             f"is not enough): {unknown[:5]}")
 
     def _term_layout(self, expr: cs.SX) -> tuple[bool, list[int], np.ndarray]:
         uses_input = bool(self.inputs) and cs.depends_on(expr, self.u)
