@@ -131,12 +131,17 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         pushes: Sequence[Push] = (), *, domain_id: int | None = None,
         mpc_parameters: Mapping[str, object] | None = None,
         mpc_command: Sequence[str] | None = None,
-        ready_timeout: float = READY_TIMEOUT) -> Recording:
+        ready_timeout: float = READY_TIMEOUT,
+        sim_parameters: Mapping[str, object] | None = None) -> Recording:
     """Run the closed loop; returns the recording (see :func:`summarise` for the metrics).
 
     ``pushes`` are applied to the simulated base (ground truth, not through ROS).
 
     ``mpc_parameters``: more ``mpc_node`` parameters (name -> value).
+
+    ``sim_parameters`` (lockstep only): the simulator's real-time emulation,
+    ``lockstep_latency``, ``lockstep_latency_jitter``, ``lockstep_seed`` and
+    ``lockstep_state_offset`` (``doc/simulator.md``, Lockstep protocol; name -> value).
 
     ``domain_id``: the ``ROS_DOMAIN_ID`` of the run; default in lockstep a private one
     derived from this process id (:func:`~horizon_mpc.nodes.mpc_process.private_domain_id`:
@@ -158,11 +163,19 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
     if mode not in ("lockstep", "realtime"):
         raise ValueError(f"mode must be 'lockstep' or 'realtime', got {mode!r}")
     cfg = load_robot_config(robot)  # an unknown robot fails here, before any node or process
+    sim_parameters = dict(sim_parameters or {})
+    unknown = sorted(set(sim_parameters) - set(SIM_LOCKSTEP_PARAMETERS))
+    if unknown:
+        raise ValueError(f"unknown simulator parameters {unknown}; the settable ones are "
+                         f"{list(SIM_LOCKSTEP_PARAMETERS)}")
+    if sim_parameters and mode != "lockstep":
+        raise ValueError(f"{sorted(sim_parameters)}: lockstep mode only")
     loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
     try:
         if mode == "lockstep":
             rec = _run_lockstep(robot, iterations, loop, mpc_parameters,
-                                private_domain_id() if domain_id is None else domain_id)
+                                private_domain_id() if domain_id is None else domain_id,
+                                sim_parameters)
         else:
             rec = _run_realtime(robot, iterations, loop, domain_id, mpc_parameters,
                                 mpc_command, ready_timeout)
@@ -233,6 +246,11 @@ class _Loop:
             self.fell_at is not None and t - self.fell_at >= self.stop_after_fall)
 
 
+#: the simulator parameters a lockstep run may set (``--sim-param``): the delays of a
+#: real-time loop, reproduced deterministically (doc/simulator.md, Lockstep protocol)
+SIM_LOCKSTEP_PARAMETERS = {"lockstep_latency": float, "lockstep_latency_jitter": float,
+                           "lockstep_seed": int, "lockstep_state_offset": float}
+
 # the loop's topics and how many publishers each has in the loop itself
 _LOOP_PUBLISHERS = {"joint_trajectory": 1, "joint_states": 1, "odom": 1, "cmd_vel": 1}
 
@@ -266,7 +284,8 @@ def _final_isolation_check(node: Node, rec: Recording, since: float) -> None:
 
 
 def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
-                  mpc_parameters: Mapping[str, object] | None, domain_id: int) -> Recording:
+                  mpc_parameters: Mapping[str, object] | None, domain_id: int,
+                  sim_parameters: Mapping[str, object] | None = None) -> Recording:
     """One process, one executor: the simulator waits for each plan (deterministic)."""
     ctx = rclpy.Context()
     # Ctrl-C: KeyboardInterrupt in this thread (see _run_realtime)
@@ -292,7 +311,8 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
         sim = SimNode(context=ctx, parameter_overrides=[
             Parameter("robot", value=robot), Parameter("lockstep", value=True),
             Parameter("control_period", value=dt), Parameter("lockstep_timeout", value=10.0),
-            Parameter("realtime_factor", value=1.0)])
+            Parameter("realtime_factor", value=1.0),
+            *(Parameter(k, value=v) for k, v in (sim_parameters or {}).items())])
         player = Node("command_player", context=ctx)
         t_player = time.perf_counter()
         pub_cmd = player.create_publisher(Twist, "cmd_vel", 10)
@@ -523,6 +543,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("-p", "--mpc-param", action="append", default=[], metavar="NAME=VALUE",
                     help="an mpc_node parameter (YAML value), e.g. -p prepare_ahead=true; "
                     "repeatable")
+    ap.add_argument("-s", "--sim-param", action="append", default=[], metavar="NAME=VALUE",
+                    help="lockstep only: a simulator delay of a real-time loop, "
+                    f"{', '.join(SIM_LOCKSTEP_PARAMETERS)} (sim s; the seed an integer), e.g. "
+                    "-s lockstep_latency=0.004; repeatable")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = ap.parse_args(remove_ros_args(["closed_loop", *argv])[1:])  # tolerate --ros-args
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
@@ -540,6 +564,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     profile = args.profile or DEFAULT_PROFILE  # an empty --profile (launch default) = default
     try:
         segments, pushes, mpc_parameters = _checked_arguments(args, profile)
+        sim_parameters = _sim_parameters(args, control_period(args.robot, mpc_parameters))
     except (ValueError, FileNotFoundError, KeyError) as exc:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         log.error("cannot run: %s", message)
@@ -547,7 +572,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, profile)
     try:
         rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
-                  pushes=pushes, mpc_parameters=mpc_parameters, domain_id=args.domain_id)
+                  pushes=pushes, mpc_parameters=mpc_parameters, domain_id=args.domain_id,
+                  sim_parameters=sim_parameters)
     except KeyboardInterrupt:
         log.error("interrupted before the run started: no outputs written")
         return 130
@@ -582,6 +608,33 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 # set by this launcher (the simulator is built for --robot, lockstep needs trigger 'state')
 _HARNESS_PARAMETERS = (*MODEL_PARAMETERS, "trigger", "use_sim_time")
+
+
+def _sim_parameters(args: argparse.Namespace, period: float) -> dict[str, object]:
+    """The ``--sim-param NAME=VALUE`` settings, typed, or ValueError naming the bad one
+    (the delays must add up to less than the control ``period``, s)."""
+    out: dict[str, object] = {}
+    for item in args.sim_param:
+        name, sep, value = item.partition("=")
+        kind = SIM_LOCKSTEP_PARAMETERS.get(name.strip())
+        if not sep or kind is None:
+            raise ValueError(f"--sim-param {item!r}: expected NAME=VALUE with NAME one of "
+                             f"{list(SIM_LOCKSTEP_PARAMETERS)}")
+        try:
+            number = kind(value)
+        except ValueError:
+            raise ValueError(f"--sim-param {item!r}: {value!r} is not a {kind.__name__}") \
+                from None
+        if kind is float and not (math.isfinite(number) and number >= 0):
+            raise ValueError(f"--sim-param {item!r}: must be finite and >= 0")
+        out[name.strip()] = number
+    if out and args.mode != "lockstep":
+        raise ValueError("--sim-param: lockstep mode only (real time has its own delays)")
+    delays = sum(v for k, v in out.items() if k != "lockstep_seed")
+    if delays >= period - 5e-4:
+        raise ValueError(f"--sim-param: the delays add up to {delays:g} s, not shorter than "
+                         f"the control period {period:g} s")
+    return out
 
 
 def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, list, dict]:

@@ -113,8 +113,13 @@ def test_yaml_numbers_without_a_dot_are_numbers(tmp_path):
     (["-p", "max_vx=abc"], "expecting type 'DOUBLE'"),               # a raw traceback
     (["-p", "gait=gallop"], "unknown gait 'gallop'"),                 # traceback, exit 1
     (["-p", "w_posture=-1"], "w_posture"),                            # traceback, exit 1
+    (["-s", "lockstep_latncy=0.004"], "expected NAME=VALUE"),
+    (["-s", "lockstep_latency=-0.004"], "must be finite and >= 0"),
+    (["-s", "lockstep_latency=0.012", "-s", "lockstep_state_offset=0.008"],
+     "not shorter than the control period"),
+    (["--mode", "realtime", "-s", "lockstep_latency=0.004"], "lockstep mode only"),
 ], ids=["duration", "robot", "unknown_param", "harness_param", "param_type", "gait",
-        "weight"])
+        "weight", "sim_param_name", "sim_param_value", "sim_param_sum", "sim_param_realtime"])
 def test_the_cli_refuses_what_cannot_run_in_one_line_with_code_2(tmp_path, caplog, args, match):
     from horizon_mpc.closed_loop import main
 
@@ -326,6 +331,23 @@ def test_other_robots_walk_forward_with_their_configs_only(robot):
     assert rec.t[-1] >= 4.95
     v = np.asarray(rec.v)[_window(rec, 3.0, 5.0)]
     assert v[:, 0].mean() > 0.1  # it walks forward (tracking quality is reported, not gated)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", ["solo12", "go2"])
+def test_states_sampled_before_the_tick_and_late_plans_do_not_make_it_fall(robot):
+    """The real-time loop's delays in lockstep: states 4 ms before each tick (predicted to it
+    by the node), plans applied 4 ms after their stamp. With a constant-velocity prediction
+    solo12 fell at 2.7 s (vx 1.1 m/s, yaw rate +-2 rad/s), as it did in real time."""
+    segs = [Segment(STAND), Segment(4.0, vx=0.3)]
+    rec = run(robot, segs, mode="lockstep", gif=False, stop_after_fall=0.5,
+              sim_parameters={"lockstep_state_offset": 0.004, "lockstep_latency": 0.004})
+    summary = summarise(rec, segs, robot=robot)
+    assert summary["falls"]["count"] == 0, summary["falls"]
+    assert rec.t[-1] >= 4.95
+    v = np.asarray(rec.v)[_window(rec, 3.0, 5.0)]
+    assert v[:, 0].mean() == pytest.approx(0.3, rel=0.2)
+    assert np.sqrt(np.mean(v[:, 5] ** 2)) < 0.2  # yaw rate
 
 
 def test_a_segment_beyond_the_limits_is_scored_against_the_clamped_command():

@@ -234,15 +234,19 @@ def test_prepared_ticks_are_feedback_steps_that_trot_a_perfect_model(walking_mpc
     # horizon keeps its first nodes closer to feasible between ticks)
     assert np.median(head) < 3e-3 and max(head[10:]) < 0.1
     assert plan.q[0, 0] - q0[0] > 0.15  # 0.8 s, with the 1 m/s^2 ramp to 0.3 m/s
-    # a state stamped 3 ms before the prepared time is predicted to it
+    # a state stamped 3 ms before the prepared time is predicted to it with the last plan's
+    # first acceleration (the one planned for the 3 ms before the prepared time)
     t_next = 41 * dt
+    acc = plan.a[:, 0].copy()
     assert mpc.prepare(t_next, cmd)
     q, v = plan.q[:, 1].copy(), plan.v[:, 1].copy()
     plan = mpc.update(t_next - 0.003, q, v, cmd)
     assert plan.t0 == t_next
     if mpc.solver.stats.history[0]["alpha"] == 1.0:
-        np.testing.assert_allclose(plan.q[:, 0], pin.integrate(mpc.model.pin_model, q, 0.003 * v),
-                                   atol=1e-9)
+        np.testing.assert_allclose(
+            plan.q[:, 0], pin.integrate(mpc.model.pin_model, q, 0.003 * (v + 0.0015 * acc)),
+            atol=1e-9)
+        np.testing.assert_allclose(plan.v[:, 0], v + 0.003 * acc, atol=1e-9)
     # 10 ms away (beyond max_extrapolation): a whole tick from the state's own time
     assert mpc.prepare(t_next + dt, cmd)
     plan = mpc.update(t_next + dt + 0.010, plan.q[:, 1], plan.v[:, 1], cmd)

@@ -206,6 +206,53 @@ def test_lockstep_runs_are_identical(context):
     assert np.ptp(a[:n, 2]) > 0.05  # and the commands really moved the joints
 
 
+def _delayed_lockstep(context: rclpy.Context, seed: int) -> tuple[list[int], list[tuple]]:
+    """A lockstep run with the real-time delays: states 3 ms before the 10 ms grid, answers
+    stamped with the grid time (a prepared tick), applied 2-4 ms after their stamp."""
+    h = Harness(context, lockstep=True, lockstep_timeout=0.0, control_period=0.01,
+                lockstep_state_offset=0.003, lockstep_latency=0.002,
+                lockstep_latency_jitter=0.002, lockstep_seed=seed)
+    applied: list[tuple] = []
+    set_trajectory = h.sim.sim.set_trajectory
+
+    def spy(cmd: object) -> None:
+        applied.append((round(cmd.t0 * 1e9), h.sim.now_ns))
+        set_trajectory(cmd)
+
+    h.sim.sim.set_trajectory = spy
+
+    def answer(msg: JointState) -> None:
+        stamp = time_to_ns(msg.header.stamp)
+        tick = -(-stamp // 10_000_000) * 10_000_000  # the next grid time (the state's own at 0)
+        h.trajectory_pub.publish(trajectory(h.sim, tick, 0.01 * np.sin(tick * 1e-9)))
+
+    try:
+        h.probe.create_subscription(JointState, "joint_states", answer, 100)
+        h.spin_until(lambda: len(h.joint_states) > 20, timeout=60.0)
+        return [time_to_ns(m.header.stamp) for m in h.joint_states], applied
+    finally:
+        h.close()
+
+
+def test_lockstep_reproduces_real_time_delays_deterministically(context):
+    stamps, applied = _delayed_lockstep(context, seed=7)
+    assert stamps[:4] == [0, 7_000_000, 17_000_000, 27_000_000]  # 3 ms before each tick
+    delays = [now - t0 for t0, now in applied]
+    assert len(delays) >= 20 and set(delays) <= {2_000_000, 3_000_000, 4_000_000}
+    assert len(set(delays)) > 1  # jittered
+    again = _delayed_lockstep(context, seed=7)
+    n = min(len(applied), len(again[1]))
+    assert again[1][:n] == applied[:n] and again[0][:20] == stamps[:20]
+
+
+def test_lockstep_delays_longer_than_a_period_are_refused(context):
+    with pytest.raises(ValueError, match="shorter than control_period"):
+        SimNode(context=context, parameter_overrides=[
+            Parameter("lockstep", value=True), Parameter("control_period", value=0.01),
+            Parameter("lockstep_latency", value=0.008),
+            Parameter("lockstep_state_offset", value=0.002)])
+
+
 def test_lockstep_waits_for_the_answer_then_times_out(harness_factory):
     h = harness_factory(lockstep=True, lockstep_timeout=0.2, control_period=0.01)
     h.spin_until(lambda: h.joint_states)

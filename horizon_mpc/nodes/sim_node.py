@@ -20,6 +20,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import random
 import textwrap
 import time
 from collections.abc import Sequence
@@ -76,6 +77,19 @@ class SimNode(Node):
         robot = par("config") or par("robot")
         cfg = load_robot_config(robot)
         physics_rate = par("physics_rate")
+        # lockstep with the delays of a real-time loop (doc/simulator.md, Lockstep protocol):
+        # physics steps from an answer's stamp until it takes effect (plus a seeded uniform
+        # jitter), and from a state to the next control grid time (checked before the
+        # simulator is built)
+        self._latency_steps = round(par("lockstep_latency") * physics_rate)
+        self._jitter_steps = round(par("lockstep_latency_jitter") * physics_rate)
+        self._offset_steps = round(par("lockstep_state_offset") * physics_rate)
+        self._rng = random.Random(par("lockstep_seed"))
+        if self._latency_steps + self._jitter_steps + self._offset_steps \
+                >= round(par("control_period") * physics_rate):
+            raise ValueError(
+                "lockstep_latency + lockstep_latency_jitter + lockstep_state_offset must be "
+                f"shorter than control_period ({par('control_period'):g} s)")
         # robot_description (URDF text): pybullet and Pinocchio load files, so the text goes
         # to a temporary file for the node's lifetime
         self._description_file = description_file(par("robot_description"))
@@ -190,6 +204,18 @@ class SimNode(Node):
                 float_range(0, 3600))
         declare("control_period", 0.01, "sim seconds advanced per lockstep step",
                 float_range(1e-4, 10))
+        declare("lockstep_latency", 0.0,
+                "lockstep: sim s from an answer's stamp until it takes effect (the previous "
+                "command runs meanwhile): a real-time loop's plan delay", float_range(0, 10))
+        declare("lockstep_latency_jitter", 0.0,
+                "lockstep: plus a uniform random delay in [0, this] (sim s, seeded)",
+                float_range(0, 10))
+        declare("lockstep_seed", 0, "lockstep: seed of the latency jitter")
+        declare("lockstep_state_offset", 0.0,
+                "lockstep: states are published this long (sim s) before the control grid "
+                "times k control_period (a state sampled before a timer tick); an answer "
+                "stamped up to this much after the state also releases the step",
+                float_range(0, 10))
         declare("kp", Parameter.Type.DOUBLE, "joint P gain (N m/rad); unset = config sim.kp",
                 float_range(0, 1e6))
         declare("kd", Parameter.Type.DOUBLE, "joint D gain (N m s/rad); unset = config sim.kd",
@@ -258,8 +284,27 @@ class SimNode(Node):
         for the answer to it.
         """
         self._started = True
-        self.sim.step(self._steps_per_control)
+        self.sim.step(self._steps_to_next_state())
         return self._publish_state(awaiting=self.lockstep)
+
+    def _steps_to_next_state(self) -> int:
+        """Physics steps from now to the next state: one control period; with the lockstep
+        delays, to the next grid time ``k control_period - lockstep_state_offset`` (after a
+        delayed answer the sim stands between two grid times)."""
+        n = self._steps_per_control
+        if not (self._offset_steps or self._latency_steps or self._jitter_steps):
+            return n
+        k = (self.sim.steps + self._offset_steps) // n + 1  # the next grid time k n
+        return max(1, k * n - self._offset_steps - self.sim.steps)
+
+    def _answer_releases(self, stamp_ns: int) -> bool:
+        """Whether a trajectory stamped ``stamp_ns`` answers the awaited state."""
+        awaited = self.awaiting_stamp_ns
+        if awaited is None:
+            return False
+        if stamp_ns == awaited or stamp_ns == 0:
+            return True
+        return awaited < stamp_ns <= awaited + self._offset_steps * self._dt_ns
 
     @property
     def peers_ready(self) -> bool:
@@ -309,16 +354,23 @@ class SimNode(Node):
     # ------------------------------------------------------------------ inputs
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         stamp_ns = time_to_ns(msg.header.stamp)
+        release = self.lockstep and self._answer_releases(stamp_ns)
         try:
             cmd = joint_trajectory_from_msg(msg, self.sim.time)
+            if release and (self._latency_steps or self._jitter_steps or self._offset_steps):
+                # the answer reaches the robot d (lockstep_latency + jitter) after its stamp,
+                # which may lie after the state it answers (a prepared tick time; a real-time
+                # plan cannot arrive before its tick): the previous command runs until then
+                d = self._latency_steps + (self._rng.randint(0, self._jitter_steps)
+                                           if self._jitter_steps else 0)
+                start_ns = stamp_ns if stamp_ns else self.awaiting_stamp_ns
+                self.sim.step(max(0, (start_ns - self.now_ns) // self._dt_ns + d))
             self.sim.set_trajectory(cmd)
         except ValueError as exc:
             self.rejected_trajectories += 1
             self._warn("trajectory", f"rejected joint_trajectory: {exc}; keeping the last "
                        "good command")
-        if self.lockstep and self.awaiting_stamp_ns is not None and (
-            stamp_ns == self.awaiting_stamp_ns or stamp_ns == 0
-        ):
+        if release:
             self.awaiting_stamp_ns = None
             self.step_once()
 
