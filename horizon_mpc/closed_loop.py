@@ -48,7 +48,7 @@ from horizon_mpc.closed_loop_profile import (
 )
 from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen, render_replay
 from horizon_mpc.config import RobotConfig, load_robot_config
-from horizon_mpc.locomotion import MpcSettings
+from horizon_mpc.locomotion import MpcSettings, config_gait, make_gait, speed_scale
 from horizon_mpc.nodes.mpc_node import MpcNode
 from horizon_mpc.nodes.mpc_parameters import MODEL_PARAMETERS, parameter_names
 from horizon_mpc.nodes.mpc_process import (
@@ -193,11 +193,19 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
 def command_limits(cfg: RobotConfig, mpc_parameters: Mapping[str, object] | None = None
                    ) -> tuple[list[float], float]:
     """The MPC node's command limits for this config and parameters: per axis (vx, vy, wz),
-    its ``max_vx``/``max_vy``/``max_wz``, else the config's ``mpc.max_velocity``; and the
-    combined one, ``max_command_norm`` (:func:`horizon_mpc.locomotion.command.limit_command`)."""
+    its ``max_vx``/``max_vy``/``max_wz``, else the config's ``mpc.max_velocity``, times the
+    gait's :func:`~horizon_mpc.locomotion.speed_scale` (``-p gait``, ``step_duration``,
+    ``duty_factor`` against the config's gait); and the combined one, ``max_command_norm``
+    (:func:`horizon_mpc.locomotion.command.limit_command`)."""
     st = MpcSettings.from_dict(cfg.section("mpc"))
     given = dict(mpc_parameters or {})
-    return ([float(given.get(name, lim)) for name, lim in
+    g = st.gait
+    duty = given.get("duty_factor", g.duty_factor)
+    gait = make_gait(str(given.get("gait", g.name)),
+                     float(given.get("step_duration", g.step_duration)), g.step_height,
+                     None if not duty else float(duty), len(cfg.feet))
+    scale = speed_scale(gait, config_gait(cfg))
+    return ([scale * float(given.get(name, lim)) for name, lim in
              zip(("max_vx", "max_vy", "max_wz"), st.max_velocity, strict=True)],
             float(given.get("max_command_norm", st.max_command_norm)))
 

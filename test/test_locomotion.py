@@ -458,3 +458,38 @@ def test_no_gait_change_puts_a_swinging_foot_down(change):
     np.testing.assert_allclose(after.swing_progress, before.swing_progress)
     sch.command(t + 0.31, moving=True)
     assert sch.gait is new and sch.pending is None
+
+
+def test_slower_gait_cycles_get_a_share_of_the_velocity_limits():
+    """The limits of a robot config are its gait's (trot): the walk (a cycle twice as long at
+    one step duration) fell at them (anymal_c at 0.4-0.5 m/s forward, a1 at 0.4 m/s
+    sideways) and walks at half of them."""
+    from horizon_mpc.locomotion import speed_scale
+
+    trot = make_gait("trot", 0.3)
+    assert speed_scale(make_gait("walk", 0.3), trot) == pytest.approx(0.5)
+    assert speed_scale(make_gait("trot", 0.4), trot) == pytest.approx(0.75)
+    assert speed_scale(make_gait("trot", 0.2), trot) == 1.0  # never above the config's
+    assert speed_scale(make_gait("pace", 0.3), trot) == 1.0
+    assert speed_scale(make_gait("stand"), trot) == 1.0
+    assert speed_scale(make_gait("walk", 0.3), make_gait("walk", 0.3)) == 1.0
+
+
+def test_the_controller_and_the_closed_loop_limit_commands_by_the_gait_walked():
+    from horizon_mpc.closed_loop import command_limits
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.mpc import WalkingMpc
+
+    mpc = WalkingMpc("solo12")
+    lim = list(mpc.settings.max_velocity)
+    assert mpc.velocity_limits == pytest.approx(lim)
+    assert mpc.scheduler.gait.duty_factor == 0.5
+    mpc.set_gait("walk")  # standing: taken at once
+    assert mpc.scheduler.gait.duty_factor == 0.75  # solo12's config no longer forces 0.5
+    assert mpc.velocity_limits == pytest.approx([0.5 * x for x in lim])
+    mpc._ramp_command(np.array([10.0, 0.0, -10.0]), 100.0)  # long enough to reach it
+    assert mpc.cmd.tolist() == pytest.approx([0.5 * lim[0], 0.0, -0.5 * lim[2]])
+    cfg = load_robot_config("solo12")
+    assert command_limits(cfg)[0] == pytest.approx(lim)
+    assert command_limits(cfg, {"gait": "walk"})[0] == pytest.approx([0.5 * x for x in lim])
+    assert command_limits(cfg, {"gait": "walk", "duty_factor": 0.5})[0] == pytest.approx(lim)

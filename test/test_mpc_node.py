@@ -645,31 +645,76 @@ def test_a_signal_while_the_problem_compiles_stops_the_compiler_and_exits_0(tmp_
             proc.kill()
 
 
-def test_the_executable_follows_the_sim_clock_unless_told_otherwise():
-    from horizon_mpc.nodes.mpc_node import with_sim_time_default
+def test_the_executable_follows_the_sim_clock_unless_told_otherwise(tmp_path, walking_mpc):
+    """use_sim_time defaults to true unless it is set FOR THIS NODE (rcl resolves -p rules
+    and params-file sections): a shared file setting it for the sim only, or '-p
+    sim:use_sim_time:=false', left mpc_node on the wall clock, never planning."""
+    shared = tmp_path / "shared.yaml"
+    shared.write_text("sim:\n  ros__parameters:\n    use_sim_time: false\n"
+                      "mpc:\n  ros__parameters:\n    gait: trot\n")
+    robot = tmp_path / "robot.yaml"
+    robot.write_text("/**:\n  ros__parameters:\n    use_sim_time: false\n")
+    cases = (([], True), (["-p", "sim:use_sim_time:=false"], True),
+             (["--params-file", str(shared)], True), (["-p", "use_sim_time:=false"], False),
+             (["-p", "mpc:use_sim_time:=false"], False),
+             (["--params-file", str(robot)], False),
+             (["--params-file", str(shared), "-r", "__node:=other"], True))
+    for args, expected in cases:
+        ctx = rclpy.Context()
+        rclpy.init(args=["mpc_node", "--ros-args", *args], context=ctx)
+        walking_mpc.t_last = None
+        try:
+            node = MpcNode(mpc=walking_mpc, context=ctx, sim_time_default=True)
+            assert node.get_parameter("use_sim_time").value is expected, args
+            node.destroy_node()
+        finally:
+            rclpy.try_shutdown(context=ctx)
+    # the library class keeps rclpy's default (tests and embedding code choose)
+    ctx = rclpy.Context()
+    rclpy.init(args=[], context=ctx)
+    try:
+        node = MpcNode(mpc=walking_mpc, context=ctx)
+        assert node.get_parameter("use_sim_time").value is False
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
 
-    assert with_sim_time_default(["mpc_node"])[-3:] == ["--ros-args", "-p",
-                                                        "use_sim_time:=true"]
-    user = ["mpc_node", "--ros-args", "-p", "use_sim_time:=false"]
-    assert with_sim_time_default(user) == user
+
+def test_parameters_the_node_does_not_have_are_named(tmp_path, walking_mpc):
+    """A misspelt parameter (max_xv for max_vx) was ignored without a word: the robot kept
+    the default limit its user thought lowered."""
+    from horizon_mpc.nodes.spin import undeclared_overrides
+
+    typo = tmp_path / "typo.yaml"
+    typo.write_text("mpc:\n  ros__parameters:\n    max_xv: 0.2\n    gait: trot\n")
+    ctx = rclpy.Context()
+    rclpy.init(args=["mpc_node", "--ros-args", "--params-file", str(typo), "-p", "foo:=1",
+                     "-p", "use_sim_time:=true"], context=ctx)
+    walking_mpc.t_last = None
+    try:
+        node = MpcNode(mpc=walking_mpc, context=ctx)
+        assert undeclared_overrides(node) == ["foo", "max_xv"]
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
 
 
-def test_use_sim_time_set_in_a_params_file_is_not_overridden(tmp_path):
-    """An added '-p use_sim_time:=true' would win over the file's false: the node would
-    wait forever for a sim clock on a robot."""
-    from horizon_mpc.nodes.mpc_node import with_sim_time_default
-
-    chosen = tmp_path / "robot.yaml"
-    chosen.write_text("/**:\n  ros__parameters:\n    use_sim_time: false\n")
-    other = tmp_path / "other.yaml"
-    other.write_text("mpc:\n  ros__parameters:\n    gait: trot\n")
-    user = ["mpc_node", "--ros-args", "--params-file", str(other), "--params-file",
-            str(chosen)]
-    assert with_sim_time_default(user) == user
-    only_other = ["mpc_node", "--ros-args", "--params-file", str(other)]
-    assert with_sim_time_default(only_other)[-1] == "use_sim_time:=true"
-    missing = ["mpc_node", "--ros-args", "--params-file", str(tmp_path / "none.yaml")]
-    assert with_sim_time_default(missing)[-1] == "use_sim_time:=true"  # rcl reports it
+def test_a_command_from_before_the_clock_went_back_is_no_command(context, walking_mpc):
+    """A restarted simulator's clock starts again at 0: the last cmd_vel of the old run
+    looked fresh (negative age) and the robot walked it, nobody commanding, for as long as
+    the old run had lasted (3.76 m in 12 s)."""
+    node = sim_time_node(context, walking_mpc)
+    try:
+        clock = node.get_clock()
+        clock.set_ros_time_override(RosTime(nanoseconds=12_000_000_000))
+        msg = Twist()
+        msg.linear.x = 0.3
+        node._on_cmd_vel(msg)
+        assert node.command[0] == pytest.approx(0.3)
+        clock.set_ros_time_override(RosTime(nanoseconds=100_000_000))  # sim restarted
+        np.testing.assert_array_equal(node.command, 0.0)
+    finally:
+        node.destroy_node()
 
 
 def test_startup_errors_end_in_one_line_and_exit_code_1_interrupts_in_0(monkeypatch):
@@ -861,7 +906,7 @@ def test_the_executable_freezes_what_startup_allocated_out_of_the_collector(monk
     """A full collection over the startup objects (~11 ms with go2) must not land in a tick:
     ``main`` builds the node, then freezes everything alive."""
     startup = [object()]
-    monkeypatch.setattr(mpc_node, "MpcNode", lambda: startup[0])
+    monkeypatch.setattr(mpc_node, "MpcNode", lambda **_: startup[0])
     gc.unfreeze()
     try:
         assert mpc_node._node_with_frozen_startup() is startup[0]
@@ -1243,12 +1288,17 @@ def test_a_stopped_simulator_is_reported_on_the_wall_clock(context, walking_mpc)
         node.destroy_node()
 
 
-def test_use_sim_time_outside_ros_args_is_no_parameter():
+def test_use_sim_time_outside_ros_args_is_no_parameter(walking_mpc):
     """'-p use_sim_time:=false' before --ros-args is ignored by rcl (warned about as a plain
     argument) and must not switch the sim-time default off either."""
-    from horizon_mpc.nodes.mpc_node import with_sim_time_default
-
-    assert with_sim_time_default(["mpc_node", "-p", "use_sim_time:=false"])[-1] == \
-        "use_sim_time:=true"
-    argv = ["mpc_node", "--ros-args", "-p", "use_sim_time:=false"]
-    assert with_sim_time_default(argv) == argv
+    for args, expected in ((["mpc_node", "-p", "use_sim_time:=false"], True),
+                           (["mpc_node", "--ros-args", "-p", "use_sim_time:=false"], False)):
+        ctx = rclpy.Context()
+        rclpy.init(args=args, context=ctx)
+        walking_mpc.t_last = None
+        try:
+            node = MpcNode(mpc=walking_mpc, context=ctx, sim_time_default=True)
+            assert node.get_parameter("use_sim_time").value is expected, args
+            node.destroy_node()
+        finally:
+            rclpy.try_shutdown(context=ctx)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["EXPERIMENTAL_GAITS", "GAITS", "ContactSchedule", "Gait", "make_gait",
-           "swing_height_profile"]
+           "speed_scale", "swing_height_profile"]
 
 
 @dataclass(frozen=True)
@@ -123,3 +123,15 @@ def make_gait(name: str, step_duration: float = 0.3, step_height: float = 0.08,
     if n_feet != 4:
         offsets = tuple(offsets[i % 4] for i in range(n_feet))
     return Gait(name, tuple(offsets), beta, float(step_duration), float(step_height))
+
+
+def speed_scale(gait: Gait, reference: Gait) -> float:
+    """The share of velocity limits set for ``reference`` (a robot config's gait) that
+    ``gait`` may be commanded: ``min(1, reference.period / gait.period)``. A foot covers
+    about the same stride per cycle in any gait, so a slower cycle walks slower: the walk
+    (duty 0.75, a cycle twice the trot's at one step duration) fell at the trot's limits
+    (anymal_c at 0.4-0.5 m/s, a1 at 0.4 m/s sideways; go2 reached 60-70 % of them). 1 for
+    a gait that stands (it walks no command) or a reference that stands."""
+    if gait.stands or reference.stands:
+        return 1.0
+    return min(1.0, reference.period / gait.period)

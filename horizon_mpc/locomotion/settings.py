@@ -10,10 +10,11 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from horizon_mpc.config import check_settings
+from horizon_mpc.config import RobotConfig, check_settings
 from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM
+from horizon_mpc.locomotion.gaits import Gait, make_gait
 
-__all__ = ["MAX_COMMAND_NORM", "GaitSettings", "MpcSettings", "Weights"]
+__all__ = ["MAX_COMMAND_NORM", "GaitSettings", "MpcSettings", "Weights", "config_gait"]
 
 #: the largest max_command_norm (>= sqrt(3) already leaves the per-axis limits alone)
 MAX_COMMAND_NORM = 10.0
@@ -165,3 +166,10 @@ def _checked(data: Any, cls: type, where: str) -> dict:
     data = dict(data or {})
     _check(data, cls, where)
     return data
+
+
+def config_gait(cfg: RobotConfig) -> Gait:
+    """The gait of a robot config's ``mpc.gait`` section: the one its ``mpc.max_velocity``
+    was tuned with (:func:`horizon_mpc.locomotion.gaits.speed_scale`)."""
+    g = MpcSettings.from_dict(cfg.section("mpc")).gait
+    return make_gait(g.name, g.step_duration, g.step_height, g.duty_factor, len(cfg.feet))

@@ -18,8 +18,9 @@ import pinocchio as pin
 
 from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.config import RobotConfig, load_robot_config
-from horizon_mpc.locomotion import MpcSettings, build_walking_problem, make_gait
+from horizon_mpc.locomotion import MpcSettings, build_walking_problem, config_gait, make_gait
 from horizon_mpc.locomotion.command import limit_command
+from horizon_mpc.locomotion.gaits import speed_scale
 from horizon_mpc.locomotion.pose_reference import (
     advance_pose,
     base_yaw,
@@ -119,6 +120,8 @@ class WalkingMpc:
         self.scheduler = GaitScheduler(make_gait(g.name, g.step_duration, g.step_height,
                                                  g.duty_factor, len(self.wp.feet)),
                                        stand_when_idle=self.settings.stand_when_idle)
+        # the gait the config's velocity limits are for (see velocity_limits)
+        self.reference_gait = config_gait(self.cfg)
         self.cmd = np.zeros(3)  # ramped command: vx, vy, wz
         self.pose_ref = np.zeros(3)  # x, y, yaw
         self.t_last: float | None = None
@@ -459,7 +462,7 @@ class WalkingMpc:
         cmd = [0.0, 0.0, 0.0] if cmd is None else np.asarray(cmd, float).tolist()
         # three numbers: plain floats (numpy's per-call overhead was ~50 us a tick here)
         target = limit_command([c if math.isfinite(c) else 0.0 for c in cmd],
-                               st.max_velocity, st.max_command_norm)
+                               self.velocity_limits, st.max_command_norm)
         if self.scheduler.gait.stands:
             # a gait that never lifts a foot (stand): the command cannot be walked; moving
             # the base on planted feet slid them (34 deg of yaw, feet dragged 2 cm)
@@ -467,6 +470,15 @@ class WalkingMpc:
         for i, (c, amax) in enumerate(zip(target, st.max_acceleration, strict=True)):
             step = amax * dt
             self.cmd[i] += min(max(c - self.cmd[i], -step), step)
+
+    @property
+    def velocity_limits(self) -> list[float]:
+        """The per-axis command limits (vx, vy, wz) of the gait walked now (or the one
+        pending): ``settings.max_velocity`` times :func:`speed_scale` of that gait against
+        the config's (a walk gets half the trot's limits at one step duration)."""
+        gait = self.scheduler.pending or self.scheduler.gait
+        scale = speed_scale(gait, self.reference_gait)
+        return [scale * float(v) for v in self.settings.max_velocity]
 
     def _advance_pose_ref(self, q: np.ndarray, dt: float) -> None:
         st = self.settings

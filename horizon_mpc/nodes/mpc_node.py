@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import gc
-import itertools
 import math
 import re
 import sys
@@ -23,7 +22,6 @@ from collections.abc import Sequence
 from pathlib import Path as FilePath
 
 import numpy as np
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry, Path
@@ -61,7 +59,7 @@ from horizon_mpc.nodes.mpc_parameters import (
     timing_warnings,
 )
 from horizon_mpc.nodes.robot_description import check_urdf_text
-from horizon_mpc.nodes.spin import spin_until_signal, split_arguments
+from horizon_mpc.nodes.spin import spin_until_signal
 
 __all__ = ["MpcNode", "main", "robot_model"]
 
@@ -87,10 +85,13 @@ class MpcNode(MpcParameters, Node):
         *,
         parameter_overrides: Sequence[Parameter] | None = None,
         mpc: WalkingMpc | None = None,
+        sim_time_default: bool = False,
         **kwargs: object,
     ) -> None:
         super().__init__(node_name, parameter_overrides=list(parameter_overrides or []),
                          **kwargs)
+        if sim_time_default:
+            self._default_to_sim_time()
         for name, default, description in MODEL_PARAMETER_DECLARATIONS:
             self._declare(name, default, description, ro=True)
         cfg = load_robot_config(self._p("config") or self._p("robot"))
@@ -124,7 +125,8 @@ class MpcNode(MpcParameters, Node):
                 f"{self._p('control_rate'):g} Hz moves the horizon {nodes_per_tick:.3g} nodes a "
                 f"tick (dt {settings.dt:g} s); it needs whole nodes (control_rate = 1/dt, or "
                 "1/(k dt)). Fractional ticks blend the warm start between nodes: go2 fell at "
-                "100 Hz in 3 of 5 real-time runs even without it")
+                "100 Hz in 3 of 5 real-time runs even without it, and at 2.9 s in the "
+                "lockstep closed loop")
         settings.max_extrapolation = float(self._p("max_extrapolation"))
         settings.weights = self._weights_from_parameters(settings.weights)
 
@@ -185,7 +187,9 @@ class MpcNode(MpcParameters, Node):
         self._path = Path()  # reused: its poses are overwritten in place (see path_msg)
         self._world_frame = "odom"  # the odometry pose's frame: the predicted path's
         self._trajectory = JointTrajectory()  # reused likewise (see trajectory_msg)
-        self._diag = DiagnosticsMessage(f"{self.get_name()}: walking MPC", mpc.cfg.name)
+        # the fully qualified name: two robots in two namespaces tell their statuses apart
+        self._diag = DiagnosticsMessage(f"{self.get_fully_qualified_name()}: walking MPC",
+                                        mpc.cfg.name)
 
         # latest accepted inputs: (stamp ns, arrays...) / (receipt time s, cmd)
         # the last few of each, (stamp ns, arrays...), to plan from a joints/base pair of one
@@ -234,6 +238,15 @@ class MpcNode(MpcParameters, Node):
         self.get_logger().info(f"waiting for joint_states and odom (trigger: {self.trigger})")
 
     # ------------------------------------------------------------------ helpers
+    def _default_to_sim_time(self) -> None:
+        """``use_sim_time`` true unless it was set for this node (a ``-p``, a params-file
+        section matching it, an override): rcl has resolved those into the node's
+        overrides. (Guessing from the command line took another node's section or
+        ``-p sim:use_sim_time:=...`` for this node's: it stayed on the wall clock and never
+        planned from the simulator's states.)"""
+        if "use_sim_time" not in getattr(self, "_parameter_overrides", {}):
+            self.set_parameters([Parameter("use_sim_time", value=True)])
+
     def now(self) -> float:
         """Node clock (s): ROS time, i.e. sim time when ``use_sim_time`` is set."""
         return self.get_clock().now().nanoseconds / NS_PER_S
@@ -289,7 +302,10 @@ class MpcNode(MpcParameters, Node):
     @property
     def command(self) -> np.ndarray:
         """The command used now: the last cmd_vel, or zero once it is older than cmd_timeout."""
-        if self._cmd is None or self.now() - self._cmd[0] > self.cmd_timeout:
+        age = None if self._cmd is None else self.now() - self._cmd[0]
+        # a negative age: the clock went back (a restarted simulator) since it came; it is
+        # no command of this clock's (it was followed for as long as the clock went back)
+        if age is None or age > self.cmd_timeout or age < 0.0:
             if self._cmd is not None and not self._cmd_timed_out:
                 self._warn("cmd_timeout", f"no cmd_vel for more than {self.cmd_timeout:g} s; "
                            "commanding zero velocity")
@@ -329,7 +345,8 @@ class MpcNode(MpcParameters, Node):
     def _on_cmd_vel(self, msg: Twist) -> None:
         try:
             st = self.mpc.settings
-            cmd, notes = command_from_twist(msg, st.max_velocity, st.max_command_norm)
+            cmd, notes = command_from_twist(msg, self.mpc.velocity_limits,
+                                            st.max_command_norm)
         except ValueError as exc:
             self.rejected["cmd_vel"] += 1
             self._warn("cmd_vel", f"rejected cmd_vel: {exc}; keeping the previous command")
@@ -572,51 +589,21 @@ def robot_model(cfg: RobotConfig, urdf_path: str = "",
     return None
 
 
-def with_sim_time_default(argv: Sequence[str]) -> list[str]:
-    """``argv`` with ``use_sim_time:=true`` added unless the user set ``use_sim_time`` (a
-    ``-p`` argument, or a ``--params-file`` that sets it).
-
-    The executables' defaults work together: ``sim_node`` stamps states with the simulated
-    clock it publishes on ``/clock``, so ``mpc_node`` started with no arguments follows that
-    clock. On a robot, pass ``--ros-args -p use_sim_time:=false``.
-    """
-    argv = list(argv)
-    ros = split_arguments(argv)[1]  # outside --ros-args, `-p use_sim_time:=false` is none
-    if any(re.search(r"(^|:)use_sim_time:=", a) for a in ros) or any(
-            _sets_use_sim_time(path) for flag, path in itertools.pairwise(ros)
-            if flag == "--params-file"):
-        return argv
-    return [*argv, "--ros-args", "-p", "use_sim_time:=true"]
-
-
 def _check_joints(model: RobotModel) -> None:
     if model.nq != 7 + len(model.joint_names):
         raise ValueError("mpc_node needs one q entry per joint (no continuous joints)")
 
 
-def _sets_use_sim_time(params_file: str) -> bool:
-    """Whether a ``--params-file`` sets ``use_sim_time`` (for any node): then it is the
-    user's choice, which an added ``-p`` would override. An unreadable file: False (rcl
-    reports it)."""
-    def has_key(data: object) -> bool:
-        if isinstance(data, dict):
-            return "use_sim_time" in data or any(has_key(v) for v in data.values())
-        return isinstance(data, list) and any(has_key(v) for v in data)
-
-    try:
-        with open(params_file, encoding="utf-8") as fh:
-            return has_key(yaml.safe_load(fh))
-    except (OSError, yaml.YAMLError):
-        return False
-
-
 def main(args: Sequence[str] | None = None) -> int:
     """Entry point of ``ros2 run horizon_mpc mpc_node``; exit code 0 on SIGINT/SIGTERM.
 
-    ``use_sim_time`` defaults to true here (see :func:`with_sim_time_default`).
+    ``use_sim_time`` defaults to true here, unless it is set for this node (``sim_node``
+    stamps states with the simulated clock it publishes on ``/clock``, so ``mpc_node``
+    started with no arguments follows that clock; on a robot, pass ``--ros-args -p
+    use_sim_time:=false``).
     """
     return spin_until_signal(_node_with_frozen_startup,
-                             with_sim_time_default(sys.argv if args is None else args), usage)
+                             list(sys.argv if args is None else args), usage)
 
 
 def usage() -> str:
@@ -641,7 +628,7 @@ def _node_with_frozen_startup() -> MpcNode:
     model, compiled functions and ROS entities live as long as the process, and a full
     collection over them (~11 ms with go2) would land in some tick; frozen, it scans only
     what the ticks allocate (doc/mpc_node.md, Real time)."""
-    node = MpcNode()
+    node = MpcNode(sim_time_default=True)
     gc.collect()
     gc.freeze()
     return node

@@ -20,7 +20,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 __all__ = ["forward_library_warnings", "spin_until_signal", "split_arguments",
-           "unmatched_params_file_sections"]
+           "undeclared_overrides", "unmatched_params_file_sections"]
 
 
 # what a node's construction raises on bad parameters or files: one line, no traceback
@@ -100,6 +100,11 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
             return 0
         for note in unmatched_params_file_sections(argv, node.get_fully_qualified_name()):
             log.warning(note)
+        unknown = undeclared_overrides(node)
+        if unknown:
+            log.warning(f"parameter(s) {unknown} set for {node.get_fully_qualified_name()} "
+                        "are not parameters of this node (misspelt, or another node's): ignored; "
+                        "--help lists its parameters")
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
@@ -134,6 +139,14 @@ def unmatched_params_file_sections(argv: Sequence[str], fqn: str) -> list[str]:
             notes.append(f"--params-file {path}: section(s) {keys} match no node here (this "
                          f"node is {fqn}): their parameters are not applied")
     return notes
+
+
+def undeclared_overrides(node: Node) -> list[str]:
+    """The parameters set for ``node`` (``-p``, params-file sections matching it, resolved
+    by rcl) that it never declared, sorted: rclpy ignores them without a word (``max_xv``
+    for ``max_vx`` left the default limit)."""
+    overrides = getattr(node, "_parameter_overrides", {})  # rclpy's resolved overrides
+    return sorted(n for n in overrides if not node.has_parameter(n))
 
 
 def _node_keys(data: object, prefix: list[str]) -> list[str]:
