@@ -48,9 +48,9 @@ from horizon_mpc.closed_loop_profile import (
 )
 from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen, render_replay
 from horizon_mpc.config import RobotConfig, load_robot_config
-from horizon_mpc.locomotion import MpcSettings, config_gait, make_gait, speed_scale
+from horizon_mpc.locomotion import GaitSettings, MpcSettings, config_gait, speed_scale
 from horizon_mpc.nodes.mpc_node import MpcNode
-from horizon_mpc.nodes.mpc_parameters import MODEL_PARAMETERS, parameter_names
+from horizon_mpc.nodes.mpc_parameters import MODEL_PARAMETERS, gait_duty_factor, parameter_names
 from horizon_mpc.nodes.mpc_process import (
     MpcMonitor,
     MpcProcess,
@@ -103,6 +103,8 @@ class Recording:
     wall_time: float = 0.0
     deadline_misses: int = 0  # the MPC node's count (solve longer than the period)
     stale_skips: int = 0  # ticks the MPC node skipped: state older than its state_timeout
+    # whole ticks on a state off the prepared tick time (with prepare_ahead)
+    prepare_misses: int = 0
     nominal_height: float = math.nan
     # the MPC node's command limits (vx, vy m/s, wz rad/s) and its combined limit (see
     # locomotion/command.py): commands beyond are limited
@@ -200,10 +202,10 @@ def command_limits(cfg: RobotConfig, mpc_parameters: Mapping[str, object] | None
     st = MpcSettings.from_dict(cfg.section("mpc"))
     given = dict(mpc_parameters or {})
     g = st.gait
-    duty = given.get("duty_factor", g.duty_factor)
-    gait = make_gait(str(given.get("gait", g.name)),
-                     float(given.get("step_duration", g.step_duration)), g.step_height,
-                     None if not duty else float(duty), len(cfg.feet))
+    gait = GaitSettings(str(given.get("gait", g.name)),
+                        float(given.get("step_duration", g.step_duration)),
+                        gait_duty_factor(float(given["duty_factor"])) if "duty_factor" in given
+                        else g.duty_factor, g.step_height).to_gait(len(cfg.feet))
     scale = speed_scale(gait, config_gait(cfg))
     return ([scale * float(given.get(name, lim)) for name, lim in
              zip(("max_vx", "max_vy", "max_wz"), st.max_velocity, strict=True)],
@@ -263,9 +265,9 @@ SIM_LOCKSTEP_PARAMETERS = {"lockstep_latency": float, "lockstep_latency_jitter":
 _LOOP_PUBLISHERS = {"joint_trajectory": 1, "joint_states": 1, "odom": 1, "cmd_vel": 1}
 
 
-class MpcSettingError(ValueError):
-    """A setting (``-p``) the MPC node refused while it was built (lockstep: in this
-    process)."""
+class SettingError(ValueError):
+    """A setting the MPC node (``-p``) or the simulator (``-s``) refused while it was built
+    (lockstep: in this process)."""
 
 
 def _foreign_publishers(node: Node, rec: Recording) -> None:
@@ -313,14 +315,18 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
                                                             value=int(iterations))]),
                 *(Parameter(k, value=v) for k, v in (mpc_parameters or {}).items())])
         except ValueError as exc:  # a -p value mpc_node refuses (an unknown gait, ...)
-            raise MpcSettingError(str(exc)) from exc
+            raise SettingError(str(exc)) from exc
         rec.build_time = time.perf_counter() - t_build
         dt = mpc.period  # its control period: 1 / control_rate, else the node dt
-        sim = SimNode(context=ctx, parameter_overrides=[
-            Parameter("robot", value=robot), Parameter("lockstep", value=True),
-            Parameter("control_period", value=dt), Parameter("lockstep_timeout", value=10.0),
-            Parameter("realtime_factor", value=1.0),
-            *(Parameter(k, value=v) for k, v in (sim_parameters or {}).items())])
+        try:
+            sim = SimNode(context=ctx, parameter_overrides=[
+                Parameter("robot", value=robot), Parameter("lockstep", value=True),
+                Parameter("control_period", value=dt), Parameter("lockstep_timeout", value=10.0),
+                Parameter("realtime_factor", value=1.0),
+                *(Parameter(k, value=v) for k, v in (sim_parameters or {}).items())])
+        except ValueError as exc:  # a -s value sim_node refuses (delays beyond the period)
+            mpc.destroy_node()
+            raise SettingError(f"sim_node: {exc}") from exc
         player = Node("command_player", context=ctx)
         t_player = time.perf_counter()
         pub_cmd = player.create_publisher(Twist, "cmd_vel", 10)
@@ -370,6 +376,7 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
         finally:  # also for an interrupted run: its figures so far
             rec.wall_time = time.perf_counter() - wall0
             rec.deadline_misses = mpc.deadline_misses
+            rec.prepare_misses = mpc.mpc.prepare_misses
             rec.stale_skips = mpc.stale_skips
         _final_isolation_check(player, rec, t_player)
         executor.shutdown()
@@ -382,14 +389,17 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
 
 def control_period(robot: str, mpc_parameters: Mapping[str, object] | None = None) -> float:
     """The MPC node's control period (s): ``1 / control_rate`` when given, else its ``dt``
-    (a ``-p dt`` or the config's ``mpc.dt``). The simulator steps and the run records on
-    this grid (it was the config's dt: with ``-p dt=0.03`` a third of the periods were
-    reported without a tick, none missing)."""
+    (a ``-p dt`` or the config's ``mpc.dt``); SettingError for one that is not > 0. The
+    simulator steps and the run records on this grid (it was the config's dt: with ``-p
+    dt=0.03`` a third of the periods were reported without a tick, none missing)."""
     given = dict(mpc_parameters or {})
-    if "control_rate" in given:
-        return 1.0 / float(given["control_rate"])
-    return float(given.get("dt", MpcSettings.from_dict(
+    name = "control_rate" if "control_rate" in given else "dt"
+    value = float(given.get(name, MpcSettings.from_dict(
         load_robot_config(robot).section("mpc")).dt))
+    if not (math.isfinite(value) and value > 0.0):
+        # the node refuses it too; here first, before dividing by it
+        raise SettingError(f"{name} must be a finite number > 0, got {given[name]!r}")
+    return 1.0 / value if name == "control_rate" else value
 
 
 def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: int | None,
@@ -508,6 +518,7 @@ def _copy_ticks(heard: TickRecord, rec: Recording) -> None:
     rec.plan_t, rec.plan_age = list(heard.plan_t), list(heard.plan_age)
     rec.deadline_misses = int(heard.counters["deadline_misses"])
     rec.stale_skips = int(heard.counters["stale_skips"])
+    rec.prepare_misses = int(heard.counters["prepare_misses"])
 
 
 def _twist(cmd: np.ndarray) -> Twist:
@@ -572,7 +583,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     profile = args.profile or DEFAULT_PROFILE  # an empty --profile (launch default) = default
     try:
         segments, pushes, mpc_parameters = _checked_arguments(args, profile)
-        sim_parameters = _sim_parameters(args, control_period(args.robot, mpc_parameters))
+        sim_parameters = _sim_parameters(args, mpc_parameters)
     except (ValueError, FileNotFoundError, KeyError) as exc:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         log.error("cannot run: %s", message)
@@ -588,7 +599,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MpcProcessError as exc:
         log.error("%s", exc)
         return 1
-    except (ParameterException, MpcSettingError) as exc:  # a -p value mpc_node refuses
+    except (ParameterException, SettingError) as exc:  # a -p/-s value a node refuses
         log.error("cannot run: %s", exc)
         return 2
     summary = summarise(rec, segments, mode=args.mode, robot=args.robot)
@@ -618,9 +629,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 _HARNESS_PARAMETERS = (*MODEL_PARAMETERS, "trigger", "use_sim_time")
 
 
-def _sim_parameters(args: argparse.Namespace, period: float) -> dict[str, object]:
-    """The ``--sim-param NAME=VALUE`` settings, typed, or ValueError naming the bad one
-    (the delays must add up to less than the control ``period``, s)."""
+def _sim_parameters(args: argparse.Namespace,
+                    mpc_parameters: Mapping[str, object]) -> dict[str, object]:
+    """The ``--sim-param NAME=VALUE`` settings, typed, or ValueError naming the bad one. The
+    simulator checks that the delays fit in the control period; here, that the state offset
+    is one the MPC node predicts over (``max_extrapolation``): a longer one makes every tick
+    a whole tick on the state's own time, which emulates no offset at all."""
     out: dict[str, object] = {}
     for item in args.sim_param:
         name, sep, value = item.partition("=")
@@ -638,10 +652,15 @@ def _sim_parameters(args: argparse.Namespace, period: float) -> dict[str, object
         out[name.strip()] = number
     if out and args.mode != "lockstep":
         raise ValueError("--sim-param: lockstep mode only (real time has its own delays)")
-    delays = sum(v for k, v in out.items() if k != "lockstep_seed")
-    if delays >= period - 5e-4:
-        raise ValueError(f"--sim-param: the delays add up to {delays:g} s, not shorter than "
-                         f"the control period {period:g} s")
+    offset = float(out.get("lockstep_state_offset", 0.0))
+    if offset > 0.0:
+        limit = float(mpc_parameters.get("max_extrapolation", MpcSettings.from_dict(
+            load_robot_config(args.robot).section("mpc")).max_extrapolation))
+        if offset > limit + 1e-12:
+            raise ValueError(f"--sim-param lockstep_state_offset={offset:g}: beyond the MPC "
+                             f"node's max_extrapolation {limit:g} s every tick runs whole on "
+                             "the state's own time (no offset emulated); raise it with -p "
+                             "max_extrapolation=...")
     return out
 
 

@@ -148,6 +148,7 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
         "max_abs_roll_pitch": float(np.abs(rpy[:, :2]).max()) if len(rpy) else math.nan,
         **ticks,
         "stale_skips": rec.stale_skips,
+        "prepare_misses": rec.prepare_misses,
         "mpc_process": rec.mpc_process,
         "domain_id": rec.domain_id,
         "foreign_publishers": list(rec.foreign_publishers),

@@ -115,11 +115,14 @@ def test_yaml_numbers_without_a_dot_are_numbers(tmp_path):
     (["-p", "w_posture=-1"], "w_posture"),                            # traceback, exit 1
     (["-s", "lockstep_latncy=0.004"], "expected NAME=VALUE"),
     (["-s", "lockstep_latency=-0.004"], "must be finite and >= 0"),
-    (["-s", "lockstep_latency=0.012", "-s", "lockstep_state_offset=0.008"],
-     "not shorter than the control period"),
+    (["-s", "lockstep_latency=0.012", "-s", "lockstep_state_offset=0.004", "-s",
+      "lockstep_latency_jitter=0.004"], "shorter than control_period"),
+    (["-s", "lockstep_state_offset=0.008"], "beyond the MPC node's max_extrapolation"),
     (["--mode", "realtime", "-s", "lockstep_latency=0.004"], "lockstep mode only"),
+    (["-p", "control_rate=0"], "control_rate"),  # a ZeroDivisionError traceback
 ], ids=["duration", "robot", "unknown_param", "harness_param", "param_type", "gait",
-        "weight", "sim_param_name", "sim_param_value", "sim_param_sum", "sim_param_realtime"])
+        "weight", "sim_param_name", "sim_param_value", "sim_param_sum", "sim_param_offset",
+        "sim_param_realtime", "control_rate_zero"])
 def test_the_cli_refuses_what_cannot_run_in_one_line_with_code_2(tmp_path, caplog, args, match):
     from horizon_mpc.closed_loop import main
 
@@ -651,6 +654,7 @@ def test_the_lockstep_loop_steps_at_the_nodes_control_rate():
     summary = summarise(rec, segs, robot="go2")
     assert summary["ticks_per_sim_second"] == pytest.approx(25, rel=1e-9)
     assert summary["periods_without_tick_percent"] == pytest.approx(0.0, abs=1e-9)
+    assert rec.prepare_misses == 0  # each tick on the state it prepared for
 
 
 def test_an_interrupted_run_writes_what_it_has_and_exits_130(tmp_path, monkeypatch, caplog):

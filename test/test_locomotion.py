@@ -242,11 +242,13 @@ def test_prepared_ticks_are_feedback_steps_that_trot_a_perfect_model(walking_mpc
     q, v = plan.q[:, 1].copy(), plan.v[:, 1].copy()
     plan = mpc.update(t_next - 0.003, q, v, cmd)
     assert plan.t0 == t_next
-    if mpc.solver.stats.history[0]["alpha"] == 1.0:
-        np.testing.assert_allclose(
-            plan.q[:, 0], pin.integrate(mpc.model.pin_model, q, 0.003 * (v + 0.0015 * acc)),
-            atol=1e-9)
-        np.testing.assert_allclose(plan.v[:, 0], v + 0.003 * acc, atol=1e-9)
+    # the predicted state is the iteration's fixed node 0 whatever its step length
+    x0 = mpc.solver.x_init
+    nq = mpc.model.nq
+    np.testing.assert_allclose(
+        x0[:nq], pin.integrate(mpc.model.pin_model, q, 0.003 * (v + 0.0015 * acc)),
+        atol=1e-9)
+    np.testing.assert_allclose(x0[nq:], v + 0.003 * acc, atol=1e-9)
     # 10 ms away (beyond max_extrapolation): a whole tick from the state's own time
     assert mpc.prepare(t_next + dt, cmd)
     plan = mpc.update(t_next + dt + 0.010, plan.q[:, 1], plan.v[:, 1], cmd)
@@ -489,7 +491,16 @@ def test_the_controller_and_the_closed_loop_limit_commands_by_the_gait_walked():
     assert mpc.velocity_limits == pytest.approx([0.5 * x for x in lim])
     mpc._ramp_command(np.array([10.0, 0.0, -10.0]), 100.0)  # long enough to reach it
     assert mpc.cmd.tolist() == pytest.approx([0.5 * lim[0], 0.0, -0.5 * lim[2]])
+    # walking, a change to the trot waits for the walk's swings: the walk's limits hold
+    mpc.scheduler.command(0.0, True)
+    mpc.set_gait("trot")
+    assert mpc.scheduler.pending is not None
+    assert mpc.velocity_limits == pytest.approx([0.5 * x for x in lim])
+    mpc.scheduler.command(1.0, True)  # the swings ended: the trot now
+    assert mpc.scheduler.pending is None and mpc.velocity_limits == pytest.approx(lim)
     cfg = load_robot_config("solo12")
     assert command_limits(cfg)[0] == pytest.approx(lim)
     assert command_limits(cfg, {"gait": "walk"})[0] == pytest.approx([0.5 * x for x in lim])
     assert command_limits(cfg, {"gait": "walk", "duty_factor": 0.5})[0] == pytest.approx(lim)
+    assert command_limits(cfg, {"gait": "walk", "duty_factor": 0.0})[0] == pytest.approx(
+        [0.5 * x for x in lim])  # 0: the gait's own

@@ -713,6 +713,11 @@ def test_a_command_from_before_the_clock_went_back_is_no_command(context, walkin
         assert node.command[0] == pytest.approx(0.3)
         clock.set_ros_time_override(RosTime(nanoseconds=100_000_000))  # sim restarted
         np.testing.assert_array_equal(node.command, 0.0)
+        # and it stays dead when the new clock passes the old command's time
+        clock.set_ros_time_override(RosTime(nanoseconds=12_100_000_000))
+        np.testing.assert_array_equal(node.command, 0.0)
+        node._on_cmd_vel(msg)  # a new one is followed
+        assert node.command[0] == pytest.approx(0.3)
     finally:
         node.destroy_node()
 

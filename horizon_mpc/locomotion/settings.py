@@ -40,6 +40,12 @@ class GaitSettings:
             raise ValueError(f"'mpc.gait.duty_factor' must be in (0, 1] (or null: the gait's "
                              f"own), got {self.duty_factor!r}")
 
+    def to_gait(self, n_feet: int) -> Gait:
+        """The :class:`~horizon_mpc.locomotion.gaits.Gait` of these settings for ``n_feet``
+        feet (ValueError: an unknown gait name)."""
+        return make_gait(self.name, self.step_duration, self.step_height, self.duty_factor,
+                         n_feet)
+
 
 @dataclass
 class Weights:
@@ -171,5 +177,4 @@ def _checked(data: Any, cls: type, where: str) -> dict:
 def config_gait(cfg: RobotConfig) -> Gait:
     """The gait of a robot config's ``mpc.gait`` section: the one its ``mpc.max_velocity``
     was tuned with (:func:`horizon_mpc.locomotion.gaits.speed_scale`)."""
-    g = MpcSettings.from_dict(cfg.section("mpc")).gait
-    return make_gait(g.name, g.step_duration, g.step_height, g.duty_factor, len(cfg.feet))
+    return MpcSettings.from_dict(cfg.section("mpc")).gait.to_gait(len(cfg.feet))

@@ -116,9 +116,7 @@ class WalkingMpc:
         self._id_maps: dict[int, BufferedFunction] = {}
         self.prepare_inverse_dynamics(self.wp.n_nodes)
         self.build_time = time.perf_counter() - t
-        g = self.settings.gait
-        self.scheduler = GaitScheduler(make_gait(g.name, g.step_duration, g.step_height,
-                                                 g.duty_factor, len(self.wp.feet)),
+        self.scheduler = GaitScheduler(self.settings.gait.to_gait(len(self.wp.feet)),
                                        stand_when_idle=self.settings.stand_when_idle)
         # the gait the config's velocity limits are for (see velocity_limits)
         self.reference_gait = config_gait(self.cfg)
@@ -143,8 +141,8 @@ class WalkingMpc:
         # the prepared step is for
         self._prepared_for: float | None = None
         # the planned accelerations (nv) around the prepared time (see prepare, _feedback)
-        self._accel_before: np.ndarray | None = None
-        self._accel_after: np.ndarray | None = None
+        self._accel_before = np.zeros(model.nv)
+        self._accel_after = np.zeros(model.nv)
         self.prepare_misses = 0  # ticks too far from the prepared time: whole ticks run
         self.restarts = 0  # ticks that restarted from a state discontinuous with the plan
         self._pose_expected = (0.0, 0.0, 0.0)  # x, y, yaw of the warm start's node 0
@@ -256,8 +254,8 @@ class WalkingMpc:
         (quadratisation and backward pass).
         The next :meth:`update` then only rolls the prepared feedback law out from its
         measured state: a state stamped up to ``settings.max_extrapolation`` away from
-        ``t_next`` is first predicted to ``t_next`` with its velocity, and the plan starts
-        at ``t_next``; a state further away gets a whole tick. Returns whether a step is
+        ``t_next`` is first predicted to ``t_next`` with the plan's acceleration, and the
+        plan starts at ``t_next``; a state further away gets a whole tick. Returns whether a step is
         prepared (False: the next update runs a whole tick).
         """
         if self.t_last is None:
@@ -268,11 +266,12 @@ class WalkingMpc:
         dt_tick = max(t_next - self.t_last, 0.0)
         self._ramp_command(cmd, dt_tick)
         a_guess = self.wp.prb.get_variable("a")
-        # the planned accelerations just before and after t_next: the feedback's prediction
-        # of a state measured a little off t_next
-        self._accel_before = a_guess.initial_guess[:, 0].copy()
+        # the planned acceleration just before t_next, of the node whose interval ends there
+        # (node k-1 for a tick of k nodes): the feedback's prediction of a state measured a
+        # little before t_next (the one after it: below, once the warm start is final)
+        before = min(max(round(dt_tick / self.settings.dt) - 1, 0), self.wp.n_nodes - 1)
+        self._accel_before = a_guess.initial_guess[:, before].copy()
         self._shift(dt_tick, self.wp.q.initial_guess[:, 0])
-        self._accel_after = a_guess.initial_guess[:, 0].copy()
         # the plan's state at t_next
         q_pred, v_pred = self.wp.q.initial_guess[:, 0], self.wp.v.initial_guess[:, 0]
         self._advance_pose_ref(q_pred, dt_tick)
@@ -287,6 +286,7 @@ class WalkingMpc:
             self._restore_standing(q_pred)
             self._set_state(q_pred, v_pred)
             self._set_references(t_next)
+        self._accel_after = a_guess.initial_guess[:, 0].copy()
         ok = self.solver.prepare()
         self._prepared_for = t_next if ok else None
         return ok
@@ -302,16 +302,13 @@ class WalkingMpc:
             return None
         if abs(lead) > 1e-9:
             # the state predicted to the prepared time with the plan's acceleration over that
-            # stretch (the last plan's first node before the prepared time, the prepared
-            # warm start's after it); a constant-velocity prediction kept the velocity
-            # measured up to 4 ms early, and solo12's legs change their velocities by
-            # 0.3-0.8 rad/s in 4 ms: it fell in 4 ms early states (doc/mpc_node.md)
-            acc = self._accel_before if lead > 0 else self._accel_after
-            if acc is None:
-                q = pin.integrate(self.model.pin_model, q, v * lead)
-            else:
-                q = pin.integrate(self.model.pin_model, q, (v + 0.5 * lead * acc) * lead)
-                v = v + lead * acc
+            # stretch (the last plan's node ending at the prepared time before it, the
+            # prepared warm start's first after it); a constant-velocity prediction kept the
+            # velocity measured up to 4 ms early, and solo12's legs change their velocities
+            # by 0.3-0.8 rad/s in 4 ms: it fell in 4 ms early states (doc/locomotion.md)
+            acc = self._accel_before if lead > 0 else self._accel_after  # set by prepare()
+            q = pin.integrate(self.model.pin_model, q, (v + 0.5 * lead * acc) * lead)
+            v = v + lead * acc
         else:
             t_plan = t
         self.t_last = t_plan
@@ -473,11 +470,12 @@ class WalkingMpc:
 
     @property
     def velocity_limits(self) -> list[float]:
-        """The per-axis command limits (vx, vy, wz) of the gait walked now (or the one
-        pending): ``settings.max_velocity`` times :func:`speed_scale` of that gait against
-        the config's (a walk gets half the trot's limits at one step duration)."""
-        gait = self.scheduler.pending or self.scheduler.gait
-        scale = speed_scale(gait, self.reference_gait)
+        """The per-axis command limits (vx, vy, wz) of the gait walked now (and of the one
+        pending, the lower): ``settings.max_velocity`` times :func:`speed_scale` of that gait
+        against the config's (a walk gets half the trot's limits at one step duration)."""
+        sch = self.scheduler
+        # while a change is pending, the slower of the two (the old gait's swings go on)
+        scale = min(speed_scale(g, self.reference_gait) for g in (sch.gait, sch.pending) if g)
         return [scale * float(v) for v in self.settings.max_velocity]
 
     def _advance_pose_ref(self, q: np.ndarray, dt: float) -> None:

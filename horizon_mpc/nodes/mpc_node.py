@@ -303,9 +303,15 @@ class MpcNode(MpcParameters, Node):
     def command(self) -> np.ndarray:
         """The command used now: the last cmd_vel, or zero once it is older than cmd_timeout."""
         age = None if self._cmd is None else self.now() - self._cmd[0]
-        # a negative age: the clock went back (a restarted simulator) since it came; it is
-        # no command of this clock's (it was followed for as long as the clock went back)
-        if age is None or age > self.cmd_timeout or age < 0.0:
+        if age is not None and age < 0.0:
+            # the clock went back (a restarted simulator) since it came: no command of this
+            # clock's (it was followed for as long as the clock went back), and dropped, or
+            # it would come back to life when the new clock reaches its time
+            self._cmd = None
+            self._warn("cmd_timeout", f"the clock went back {-age:.3f} s since the last "
+                       "cmd_vel: dropped it; commanding zero velocity")
+            self._cmd_timed_out = True
+        if self._cmd is None or age > self.cmd_timeout:
             if self._cmd is not None and not self._cmd_timed_out:
                 self._warn("cmd_timeout", f"no cmd_vel for more than {self.cmd_timeout:g} s; "
                            "commanding zero velocity")

@@ -144,8 +144,8 @@ class MpcParameters:
           "tick's last iteration (quadratisation, backward pass): a tick is then only its "
           "feedback step from the new state (low latency); false: whole ticks", ro=True)
         d("max_extrapolation", float(st.max_extrapolation), "a state stamped up to this far "
-          "(s) from the prepared tick time is predicted to it with its velocity; further: "
-          "a whole tick", float_range(0, 1), ro=True)
+          "(s) from the prepared tick time is predicted to it with the plan's acceleration; "
+          "further: a whole tick", float_range(0, 1), ro=True)
         d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
           "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)
         d("state_reliability", "reliable", "QoS reliability of the joint_states and odom "
@@ -161,7 +161,9 @@ class MpcParameters:
           "the gait's own, walk 0.75, the others 0.5); live", float_range(0.0, 1.0))
         for name, vmax, unit in zip(LIVE_LIMITS, st.max_velocity, ("m/s", "m/s", "rad/s"),
                                     strict=True):
-            d(name, float(vmax), f"|{name[4:]}| command limit ({unit}); live", float_range(0, 5))
+            d(name, float(vmax), f"|{name[4:]}| command limit ({unit}) of the config's gait "
+              "(a gait with a slower cycle, e.g. walk, gets a share of it); live",
+              float_range(0, 5))
         d("max_command_norm", float(st.max_command_norm), "combined command limit: the "
           "command's norm with each axis divided by its limit (max_vx, max_vy, max_wz) is at "
           "most this, a command beyond is scaled down along its direction (1.414: two axes at "

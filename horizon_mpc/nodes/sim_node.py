@@ -59,6 +59,10 @@ _MAX_LAG = 0.25  # s (wall): further behind the wall clock than this, the pacing
 _FREE_RUN_SLICE = 0.002  # s (wall) of stepping per callback when running as fast as possible
 
 
+#: the lockstep emulation of a real-time loop's delays (doc/simulator.md), sim s
+LOCKSTEP_DELAYS = ("lockstep_latency", "lockstep_latency_jitter", "lockstep_state_offset")
+
+
 class SimNode(Node):
     """The simulator node. Construct after ``rclpy.init()``; spin it with any executor."""
 
@@ -81,9 +85,11 @@ class SimNode(Node):
         # physics steps from an answer's stamp until it takes effect (plus a seeded uniform
         # jitter), and from a state to the next control grid time (checked before the
         # simulator is built)
-        self._latency_steps = round(par("lockstep_latency") * physics_rate)
-        self._jitter_steps = round(par("lockstep_latency_jitter") * physics_rate)
-        self._offset_steps = round(par("lockstep_state_offset") * physics_rate)
+        delays = {name: par(name) for name in LOCKSTEP_DELAYS}
+        if not par("lockstep"):  # real time has delays of its own
+            delays = dict.fromkeys(LOCKSTEP_DELAYS, 0.0)
+        self._latency_steps, self._jitter_steps, self._offset_steps = (
+            math.floor(delays[name] * physics_rate + 0.5) for name in LOCKSTEP_DELAYS)
         self._rng = random.Random(par("lockstep_seed"))
         if self._latency_steps + self._jitter_steps + self._offset_steps \
                 >= round(par("control_period") * physics_rate):
@@ -126,11 +132,18 @@ class SimNode(Node):
         self._steps_per_control = max(1, round(par("control_period") * physics_rate))
         for name, steps, period in (("state_rate", self._steps_per_state, 1 / par("state_rate")),
                                     ("control_period", self._steps_per_control,
-                                     par("control_period"))):
+                                     par("control_period")),
+                                    *((name, steps, delays[name]) for name, steps in zip(
+                                        LOCKSTEP_DELAYS, (self._latency_steps,
+                                                          self._jitter_steps,
+                                                          self._offset_steps), strict=True))):
             if abs(steps * self.sim.dt - period) > 1e-9:
                 self.get_logger().warning(
                     f"{name}: {period:g} s is not a whole number of physics steps; "
                     f"using {steps} steps = {steps * self.sim.dt:g} s")
+        if not self.lockstep and any(par(name) for name in LOCKSTEP_DELAYS):
+            self.get_logger().warning(f"{', '.join(LOCKSTEP_DELAYS)} apply in lockstep only: "
+                                      "ignored")
 
         self.rejected_trajectories = 0
         self.rejected_wrenches = 0

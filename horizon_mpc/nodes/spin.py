@@ -103,8 +103,9 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
         unknown = undeclared_overrides(node)
         if unknown:
             log.warning(f"parameter(s) {unknown} set for {node.get_fully_qualified_name()} "
-                        "are not parameters of this node (misspelt, or another node's): ignored; "
-                        "--help lists its parameters")
+                        "are not parameters of this node (misspelt, or another node's, e.g. from a "
+                        "/** section, which applies to every node): ignored; --help lists its "
+                        "parameters")
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
