@@ -461,3 +461,22 @@ def test_a_variable_named_x_beside_other_states_is_warned_about_and_stacked_stay
     X, U, _ = solver.stacked_solution
     assert solver.solution["x"].shape == (1, 6) and X.shape == (2, 6) and U.shape == (1, 5)
     np.testing.assert_array_equal(X[:1], solver.solution["x"])
+
+
+@pytest.mark.parametrize("name", ["ipopt", "gnsqp", "ilqr"])
+def test_verbose_prints_the_iterations_and_quiet_prints_nothing(prb, name, capfd):
+    """'verbose' was accepted by IPOPT and GN-SQP and did nothing; ILQR logged at INFO,
+    which is silent unless the caller configures logging."""
+    x = prb.get_variable("x")
+    x.set_bounds([0.0, 0.0], [0.0, 0.0], nodes=0)
+    prb.create_final_constraint("goal", x - np.array([1.0, 0.0]))
+    prb.create_cost("effort", prb.get_variable("u"), weight=0.1)
+    opts = {"codegen": False} if name == "ilqr" else {}
+    assert make_solver(name, prb, opts).solve()
+    quiet = capfd.readouterr().out
+    assert quiet.strip() == ""
+    assert make_solver(name, prb, {**opts, "verbose": True}).solve()
+    out = capfd.readouterr().out
+    # a line per iteration (IPOPT: its table); this QP converges in one step
+    assert len(out.strip().splitlines()) >= 2, out
+    assert "cost" in out or "objective" in out, out

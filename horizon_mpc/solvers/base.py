@@ -88,6 +88,12 @@ class Solver:
                 log.warning("solution[%r] will be the variable %r, not the stacked %s: "
                             "those are in solver.stacked_solution", key, key, kind)
 
+    def _progress(self, line: str) -> None:
+        """With the ``verbose`` option, one line of progress on stdout (logging at INFO is
+        silent unless the caller configured logging: ``verbose`` then showed nothing)."""
+        if self.opts["verbose"]:
+            print(f"{self.name}: {line}", flush=True)  # noqa: T201
+
     @property
     def stacked_solution(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The last solution stacked: states (nx, N+1), inputs (nu, N), singles (ns, 1)

@@ -89,6 +89,8 @@ class IpoptSolver(NlpSolver):
         if warm not in self._solvers:
             o = self.opts
             ipopt = {k: o[k] for k in self._IPOPT_ALIASES}
+            if o["verbose"]:  # IPOPT's own iteration table
+                ipopt["print_level"] = max(o["print_level"], 5)
             ipopt["sb"] = "yes"
             if warm:
                 ipopt.update({"warm_start_init_point": "yes", "mu_init": o["warm_mu_init"],
