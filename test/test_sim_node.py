@@ -253,6 +253,25 @@ def test_lockstep_delays_longer_than_a_period_are_refused(context):
             Parameter("lockstep_state_offset", value=0.002)])
 
 
+def test_a_physics_rate_slower_than_the_control_period_starts_without_delays(context):
+    """physics_rate 50 (in its range) with the 0.01 s control period: the delay check took
+    the period for 0 steps and refused to start, in real time and with no delay set."""
+    for lockstep in (False, True):
+        node = SimNode(context=context, parameter_overrides=[
+            Parameter("physics_rate", value=50.0), Parameter("lockstep", value=lockstep)])
+        node.destroy_node()
+
+
+def test_the_help_lists_every_parameter(capsys):
+    from horizon_mpc.nodes.sim_node import SIM_PARAMETERS, main
+
+    assert main(["sim_node", "--help"]) == 0
+    out = capsys.readouterr().out
+    for name, *_ in SIM_PARAMETERS:
+        assert f"  {name} (default " in out, name
+    assert "kp (default unset)" in out
+
+
 def test_lockstep_waits_for_the_answer_then_times_out(harness_factory):
     h = harness_factory(lockstep=True, lockstep_timeout=0.2, control_period=0.01)
     h.spin_until(lambda: h.joint_states)

@@ -17,7 +17,6 @@ drive the simulator and a controller deterministically in one process and one ex
 
 from __future__ import annotations
 
-import functools
 import math
 import os
 import random
@@ -63,6 +62,59 @@ _FREE_RUN_SLICE = 0.002  # s (wall) of stepping per callback when running as fas
 LOCKSTEP_DELAYS = ("lockstep_latency", "lockstep_latency_jitter", "lockstep_state_offset")
 
 
+#: sim_node's parameters: (name, default or an unset type, description[, range])
+SIM_PARAMETERS = [
+    ("robot", "go2", "robot config name (config/<robot>.yaml)"),
+    ("config", "", "path of a robot config YAML (overrides 'robot')"),
+    ("urdf_path", "", "URDF to simulate instead of the config's"),
+    ("robot_description", "", "URDF XML text to simulate, as robot_state_publisher's "
+     "parameter (overrides urdf_path)"),
+    ("physics_rate", 1000.0, "physics steps per sim second (Hz)",
+     float_range(50, 20000)),
+    ("state_rate", 500.0, "joint_states/odom/clock publish rate (Hz, sim time)",
+     float_range(1, 20000)),
+    ("realtime_factor", 1.0,
+     "sim seconds per wall second; 0 = as fast as possible", float_range(0, 1000)),
+    ("lockstep", False,
+     "advance one control_period per answered state (see doc/simulator.md)"),
+    ("lockstep_timeout", 1.0,
+     "wall seconds to wait for the answer to a state; 0 = wait forever",
+     float_range(0, 3600)),
+    ("control_period", 0.01, "sim seconds advanced per lockstep step",
+     float_range(1e-4, 10)),
+    ("lockstep_latency", 0.0,
+     "lockstep: sim s from an answer's stamp until it takes effect (the previous "
+     "command runs meanwhile): a real-time loop's plan delay", float_range(0, 10)),
+    ("lockstep_latency_jitter", 0.0,
+     "lockstep: plus a uniform random delay in [0, this] (sim s, seeded)",
+     float_range(0, 10)),
+    ("lockstep_seed", 0, "lockstep: seed of the latency jitter"),
+    ("lockstep_state_offset", 0.0,
+     "lockstep: states are published this long (sim s) before the control grid "
+     "times k control_period (a state sampled before a timer tick); an answer "
+     "stamped up to this much after the state also releases the step",
+     float_range(0, 10)),
+    ("kp", Parameter.Type.DOUBLE, "joint P gain (N m/rad); unset = config sim.kp",
+     float_range(0, 1e6)),
+    ("kd", Parameter.Type.DOUBLE, "joint D gain (N m s/rad); unset = config sim.kd",
+     float_range(0, 1e5)),
+    ("friction", Parameter.Type.DOUBLE,
+     "foot-ground friction coefficient; unset = config sim.lateral_friction",
+     float_range(0, 10)),
+    ("initial_x", 0.0, "start base x (m)", float_range(-1e3, 1e3)),
+    ("initial_y", 0.0, "start base y (m)", float_range(-1e3, 1e3)),
+    ("initial_yaw", 0.0, "start base yaw (rad)", float_range(-math.pi, math.pi)),
+    ("push_duration", 0.1, "duration of an external_wrench push (s)",
+     float_range(1e-3, 60)),
+    ("trajectory_timeout", 0.5,
+     "a trajectory older than this (sim s) is stale: the robot holds",
+     float_range(1e-3, 1e3)),
+    ("max_stamp_offset", 1.0,
+     "trajectories stamped further than this from now (sim s) are rejected",
+     float_range(1e-3, 1e3)),
+]
+
+
 class SimNode(Node):
     """The simulator node. Construct after ``rclpy.init()``; spin it with any executor."""
 
@@ -91,11 +143,13 @@ class SimNode(Node):
         self._latency_steps, self._jitter_steps, self._offset_steps = (
             math.floor(delays[name] * physics_rate + 0.5) for name in LOCKSTEP_DELAYS)
         self._rng = random.Random(par("lockstep_seed"))
-        if self._latency_steps + self._jitter_steps + self._offset_steps \
-                >= round(par("control_period") * physics_rate):
+        control_steps = max(1, round(par("control_period") * physics_rate))
+        delay_steps = self._latency_steps + self._jitter_steps + self._offset_steps
+        if delay_steps and delay_steps >= control_steps:
             raise ValueError(
                 "lockstep_latency + lockstep_latency_jitter + lockstep_state_offset must be "
-                f"shorter than control_period ({par('control_period'):g} s)")
+                f"shorter than control_period: {delay_steps} against {control_steps} physics "
+                f"steps of {1 / physics_rate:g} s (each delay is rounded to whole steps)")
         # robot_description (URDF text): pybullet and Pinocchio load files, so the text goes
         # to a temporary file for the node's lifetime
         self._description_file = description_file(par("robot_description"))
@@ -141,9 +195,9 @@ class SimNode(Node):
                 self.get_logger().warning(
                     f"{name}: {period:g} s is not a whole number of physics steps; "
                     f"using {steps} steps = {steps * self.sim.dt:g} s")
-        if not self.lockstep and any(par(name) for name in LOCKSTEP_DELAYS):
-            self.get_logger().warning(f"{', '.join(LOCKSTEP_DELAYS)} apply in lockstep only: "
-                                      "ignored")
+        ignored = [name for name in (*LOCKSTEP_DELAYS, "lockstep_seed") if par(name)]
+        if not self.lockstep and ignored:
+            self.get_logger().warning(f"{', '.join(ignored)}: lockstep only; ignored")
 
         self.rejected_trajectories = 0
         self.rejected_wrenches = 0
@@ -197,56 +251,8 @@ class SimNode(Node):
 
     def _declare_parameters(self) -> None:
         # all read at start-up: read-only, so a live set is refused, not accepted and ignored
-        declare = functools.partial(declare_parameter, self, read_only=True)
-
-        declare("robot", "go2", "robot config name (config/<robot>.yaml)")
-        declare("config", "", "path of a robot config YAML (overrides 'robot')")
-        declare("urdf_path", "", "URDF to simulate instead of the config's")
-        declare("robot_description", "", "URDF XML text to simulate, as robot_state_publisher's "
-                "parameter (overrides urdf_path)")
-        declare("physics_rate", 1000.0, "physics steps per sim second (Hz)",
-                float_range(50, 20000))
-        declare("state_rate", 500.0, "joint_states/odom/clock publish rate (Hz, sim time)",
-                float_range(1, 20000))
-        declare("realtime_factor", 1.0,
-                "sim seconds per wall second; 0 = as fast as possible", float_range(0, 1000))
-        declare("lockstep", False,
-                "advance one control_period per answered state (see doc/simulator.md)")
-        declare("lockstep_timeout", 1.0,
-                "wall seconds to wait for the answer to a state; 0 = wait forever",
-                float_range(0, 3600))
-        declare("control_period", 0.01, "sim seconds advanced per lockstep step",
-                float_range(1e-4, 10))
-        declare("lockstep_latency", 0.0,
-                "lockstep: sim s from an answer's stamp until it takes effect (the previous "
-                "command runs meanwhile): a real-time loop's plan delay", float_range(0, 10))
-        declare("lockstep_latency_jitter", 0.0,
-                "lockstep: plus a uniform random delay in [0, this] (sim s, seeded)",
-                float_range(0, 10))
-        declare("lockstep_seed", 0, "lockstep: seed of the latency jitter")
-        declare("lockstep_state_offset", 0.0,
-                "lockstep: states are published this long (sim s) before the control grid "
-                "times k control_period (a state sampled before a timer tick); an answer "
-                "stamped up to this much after the state also releases the step",
-                float_range(0, 10))
-        declare("kp", Parameter.Type.DOUBLE, "joint P gain (N m/rad); unset = config sim.kp",
-                float_range(0, 1e6))
-        declare("kd", Parameter.Type.DOUBLE, "joint D gain (N m s/rad); unset = config sim.kd",
-                float_range(0, 1e5))
-        declare("friction", Parameter.Type.DOUBLE,
-                "foot-ground friction coefficient; unset = config sim.lateral_friction",
-                float_range(0, 10))
-        declare("initial_x", 0.0, "start base x (m)", float_range(-1e3, 1e3))
-        declare("initial_y", 0.0, "start base y (m)", float_range(-1e3, 1e3))
-        declare("initial_yaw", 0.0, "start base yaw (rad)", float_range(-math.pi, math.pi))
-        declare("push_duration", 0.1, "duration of an external_wrench push (s)",
-                float_range(1e-3, 60))
-        declare("trajectory_timeout", 0.5,
-                "a trajectory older than this (sim s) is stale: the robot holds",
-                float_range(1e-3, 1e3))
-        declare("max_stamp_offset", 1.0,
-                "trajectories stamped further than this from now (sim s) are rejected",
-                float_range(1e-3, 1e3))
+        for name, default, description, *rng in SIM_PARAMETERS:
+            declare_parameter(self, name, default, description, *rng, read_only=True)
 
     def _param(self, name: str) -> object:
         try:
@@ -425,18 +431,21 @@ def main(args: Sequence[str] | None = None) -> int:
 
 
 def usage() -> str:
-    """The ``--help`` text: what the node does and where its parameters are described."""
+    """The ``--help`` text: what the node does and every parameter (all read at start-up)."""
     short = __doc__.split("In short:")[1].split("\n\nThe physics")[0]
     text = " ".join(short.replace("*", "").split()).replace("``", "'")
-    return "\n".join([
-        "usage: ros2 run horizon_mpc sim_node [--ros-args -p NAME:=VALUE ... "
-        "--params-file FILE]", "",
-        textwrap.fill(f"The PyBullet simulator of a robot config as a ROS 2 node: {text}",
-                      width=92), "",
-        textwrap.fill("Parameters (robot, urdf_path, physics_rate, state_rate, realtime_factor, "
-                      "lockstep, control_period, kp, kd, friction, initial pose, push and "
-                      "time-out settings): doc/simulator.md, or `ros2 param describe` on the "
-                      "running node.", width=92)])
+    lines = ["usage: ros2 run horizon_mpc sim_node [--ros-args -p NAME:=VALUE ... "
+             "--params-file FILE]", "",
+             textwrap.fill(f"The PyBullet simulator of a robot config as a ROS 2 node: {text}",
+                           width=92), "",
+             textwrap.fill("Parameters, all read at start-up (details: doc/simulator.md):",
+                           width=92), ""]
+    for name, default, description, *_ in SIM_PARAMETERS:
+        shown = "unset" if isinstance(default, Parameter.Type) else repr(default)
+        lines.append(f"  {name} (default {shown})")
+        lines.append(textwrap.fill(description, width=92, initial_indent=" " * 6,
+                                   subsequent_indent=" " * 6))
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
