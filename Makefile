@@ -93,7 +93,7 @@ $(DATA_STAMP): $(DEPS_STAMP) setup.py $(DATA_FILES)
 
 demo: setup
 	@echo "==> Closed-loop demo (ROS_DOMAIN_ID=$(ROS_DOMAIN_ID), localhost only) -> out/closed_loop"
-	$(VPY) -m horizon_mpc.closed_loop --out out/closed_loop
+	$(VPY) -m horizon_mpc.closed_loop --out out/closed_loop --domain-id $(ROS_DOMAIN_ID)
 
 lint: setup
 	@echo "==> ruff check"

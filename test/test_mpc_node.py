@@ -416,6 +416,18 @@ def test_diagnostics_rate_0_sends_a_status_every_tick(context, walking_mpc):
     assert len(out["diag"]) == len(out["traj"]) == 4
     values = {kv.key: kv.value for kv in out["diag"][-1].status[0].values}
     assert int(values["ticks"]) == 4 and float(values["solve_time_max_ms"]) > 0.0
+    assert int(values["solver_errors"]) == 0
+    # an exception in a tick is counted where a user can see it (it was an attribute only)
+    update = node.mpc.update
+    node.mpc.update = lambda *a, **k: (_ for _ in ()).throw(RuntimeError("boom"))
+    try:
+        out = drive_in_sim_time(node, 1, start_ns=11 * NS_PER_S)
+    finally:
+        node.mpc.update = update
+    assert node.solver_errors == 1
+    node._publish_diagnostics(node.plan, 12 * NS_PER_S)
+    values = {kv.key: kv.value for kv in node._pub_diag.msgs[-1].status[0].values}
+    assert int(values["solver_errors"]) == 1
     node.destroy_node()
 
 

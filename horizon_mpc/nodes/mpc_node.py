@@ -558,6 +558,7 @@ class MpcNode(MpcParameters, Node):
             "constraint_violation": stats.get("constraint_violation", math.nan),
             "solver_status": stats.get("status", ""),
             "deadline_misses": self.deadline_misses,
+            "solver_errors": self.solver_errors,
             "state_age_ms": self.last_state_age * 1e3,
             "gait": self.mpc.settings.gait.name,
             "gait_phase": self.gait_phase(stamp_ns / NS_PER_S),
