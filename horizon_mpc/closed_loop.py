@@ -583,7 +583,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     profile = args.profile or DEFAULT_PROFILE  # an empty --profile (launch default) = default
     try:
         segments, pushes, mpc_parameters = _checked_arguments(args, profile)
-        sim_parameters = _sim_parameters(args, mpc_parameters)
+        sim_parameters = _sim_parameters(args)
     except (ValueError, FileNotFoundError, KeyError) as exc:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         log.error("cannot run: %s", message)
@@ -629,12 +629,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 _HARNESS_PARAMETERS = (*MODEL_PARAMETERS, "trigger", "use_sim_time")
 
 
-def _sim_parameters(args: argparse.Namespace,
-                    mpc_parameters: Mapping[str, object]) -> dict[str, object]:
-    """The ``--sim-param NAME=VALUE`` settings, typed, or ValueError naming the bad one. The
-    simulator checks that the delays fit in the control period; here, that the state offset
-    is one the MPC node predicts over (``max_extrapolation``): a longer one makes every tick
-    a whole tick on the state's own time, which emulates no offset at all."""
+def _sim_parameters(args: argparse.Namespace) -> dict[str, object]:
+    """The ``--sim-param NAME=VALUE`` settings, typed, or ValueError naming the bad one (the
+    simulator checks that the delays fit in the control period)."""
     out: dict[str, object] = {}
     for item in args.sim_param:
         name, sep, value = item.partition("=")
@@ -649,18 +646,11 @@ def _sim_parameters(args: argparse.Namespace,
                 from None
         if kind is float and not (math.isfinite(number) and number >= 0):
             raise ValueError(f"--sim-param {item!r}: must be finite and >= 0")
+        if kind is int and not 0 <= number < 2**63:  # a ROS integer parameter (int64)
+            raise ValueError(f"--sim-param {item!r}: must be in [0, 2^63)")
         out[name.strip()] = number
     if out and args.mode != "lockstep":
         raise ValueError("--sim-param: lockstep mode only (real time has its own delays)")
-    offset = float(out.get("lockstep_state_offset", 0.0))
-    if offset > 0.0:
-        limit = float(mpc_parameters.get("max_extrapolation", MpcSettings.from_dict(
-            load_robot_config(args.robot).section("mpc")).max_extrapolation))
-        if offset > limit + 1e-12:
-            raise ValueError(f"--sim-param lockstep_state_offset={offset:g}: beyond the MPC "
-                             f"node's max_extrapolation {limit:g} s every tick runs whole on "
-                             "the state's own time (no offset emulated); raise it with -p "
-                             "max_extrapolation=...")
     return out
 
 

@@ -117,11 +117,11 @@ def test_yaml_numbers_without_a_dot_are_numbers(tmp_path):
     (["-s", "lockstep_latency=-0.004"], "must be finite and >= 0"),
     (["-s", "lockstep_latency=0.012", "-s", "lockstep_state_offset=0.004", "-s",
       "lockstep_latency_jitter=0.004"], "shorter than control_period"),
-    (["-s", "lockstep_state_offset=0.008"], "beyond the MPC node's max_extrapolation"),
+    (["-s", "lockstep_seed=99999999999999999999"], "must be in [0, 2^63)"),  # traceback
     (["--mode", "realtime", "-s", "lockstep_latency=0.004"], "lockstep mode only"),
     (["-p", "control_rate=0"], "control_rate"),  # a ZeroDivisionError traceback
 ], ids=["duration", "robot", "unknown_param", "harness_param", "param_type", "gait",
-        "weight", "sim_param_name", "sim_param_value", "sim_param_sum", "sim_param_offset",
+        "weight", "sim_param_name", "sim_param_value", "sim_param_sum", "sim_param_seed",
         "sim_param_realtime", "control_rate_zero"])
 def test_the_cli_refuses_what_cannot_run_in_one_line_with_code_2(tmp_path, caplog, args, match):
     from horizon_mpc.closed_loop import main

@@ -234,8 +234,10 @@ def test_prepared_ticks_are_feedback_steps_that_trot_a_perfect_model(walking_mpc
     # horizon keeps its first nodes closer to feasible between ticks)
     assert np.median(head) < 3e-3 and max(head[10:]) < 0.1
     assert plan.q[0, 0] - q0[0] > 0.15  # 0.8 s, with the 1 m/s^2 ramp to 0.3 m/s
-    # a state stamped 3 ms before the prepared time is predicted to it with the last plan's
-    # first acceleration (the one planned for the 3 ms before the prepared time)
+    # with max_extrapolation (0 by default: a whole tick), a state stamped 3 ms before the
+    # prepared time is predicted to it with the last plan's first acceleration (the one
+    # planned for the 3 ms before the prepared time)
+    mpc.settings.max_extrapolation = 0.005
     t_next = 41 * dt
     acc = plan.a[:, 0].copy()
     assert mpc.prepare(t_next, cmd)
@@ -254,6 +256,7 @@ def test_prepared_ticks_are_feedback_steps_that_trot_a_perfect_model(walking_mpc
     plan = mpc.update(t_next + dt + 0.010, plan.q[:, 1], plan.v[:, 1], cmd)
     assert plan.t0 == t_next + dt + 0.010 and mpc.prepare_misses == misses + 1
     assert mpc.solver.stats.status == "rti"
+    mpc.settings.max_extrapolation = 0.0  # the fixture is shared
 
 
 def test_the_dynamics_pattern_covers_every_nonzero_of_the_walking_jacobians(walking_mpc):

@@ -869,6 +869,38 @@ def _feed_state(node: MpcNode, ns: int, q: np.ndarray) -> None:
     node._on_odom(odometry_to_msg(stamp, q[:3], q[3:7], zeros, zeros))
 
 
+def test_a_timer_tick_plans_from_the_state_of_the_prepared_time_when_it_came(context,
+                                                                              walking_mpc):
+    """A timer tick sees the state of its own time and sometimes a newer one (a 250 Hz
+    simulator's next state came before the tick's callback): planning from the newer one
+    was a prepare miss (a whole tick, 12 % of go2's real-time ticks) or, with
+    max_extrapolation, a prediction of the state (solo12 fell at 0.4 m/s in real time)."""
+    node = sim_time_node(context, walking_mpc, trigger="timer", prepare_ahead=True)
+    try:
+        sent = Sent()
+        node._pub_traj, node._pub_path, node._pub_diag = sent, Sent(), Sent()
+        _, q = standing_configuration(node.mpc.cfg)
+        start, period, state = 10 * NS_PER_S, 20_000_000, 4_000_000
+        _feed_state(node, start, q)
+        assert node.tick()  # the bootstrap, then the tick at start + period prepared
+        misses = node.mpc.prepare_misses
+        for k in range(1, 6):
+            _feed_state(node, start + k * period, q)
+            _feed_state(node, start + k * period + state, q)  # the next one came too
+            assert node.tick()
+            assert time_to_ns(sent.msgs[-1].header.stamp) == start + k * period
+            assert node.mpc.solver.stats.status == "feedback"
+        assert node.mpc.prepare_misses == misses
+        # without the prepared time's state: the newest, a whole tick on its own time
+        _feed_state(node, start + 6 * period + state, q)
+        assert node.tick()
+        assert time_to_ns(sent.msgs[-1].header.stamp) == start + 6 * period + state
+        assert node.mpc.prepare_misses == misses + 1
+    finally:
+        walking_mpc.settings.prepare_ahead = False  # the fixture is shared
+        node.destroy_node()
+
+
 def test_prepare_ahead_ticks_are_feedback_steps_stamped_at_their_plan_time(context,
                                                                              walking_mpc):
     """With prepare_ahead, a state on the prepared tick time is answered by the feedback

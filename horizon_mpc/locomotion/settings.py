@@ -119,9 +119,13 @@ class MpcSettings:
     # latency is one rollout and line search from the measured state (~1 ms against ~5).
     # The lockstep sweep walks 13 of 13 commands this way (go2, solo12, anymal_c)
     prepare_ahead: bool = True
-    # s: a state stamped this far from the prepared tick time is predicted to it with its
-    # velocity; further away, the tick runs whole
-    max_extrapolation: float = 0.005
+    # s: a state stamped this far from the prepared tick time is predicted to it with the
+    # plan's acceleration; further away, the tick runs whole on the state's own time. 0 by
+    # default: the node plans from the state stamped at the prepared time when it has one
+    # (mpc_node._state_pair), and a prediction (5 ms allowed until session 21) made solo12
+    # fall at its 0.4 m/s limit in real time (2 of 2; 0 of 2 without) and in delayed
+    # lockstep loops at the limits and in the walk gait (solo12, anymal_c, go2, go1, hyq)
+    max_extrapolation: float = 0.0
 
     def __post_init__(self) -> None:
         check_settings(self, positive=("dt", "friction", "base_height", "barrier_mu",

@@ -291,6 +291,11 @@ class WalkingMpc:
         self._prepared_for = t_next if ok else None
         return ok
 
+    @property
+    def prepared_for(self) -> float | None:
+        """The tick time (s) a :meth:`prepare` awaits its state for, or None."""
+        return self._prepared_for
+
     def _feedback(self, t: float, q: np.ndarray, v: np.ndarray) -> Plan | None:
         """The feedback phase of the prepared iteration from the state measured at ``t``
         (checked: :meth:`_checked_state`); None when ``t`` is too far from the prepared time

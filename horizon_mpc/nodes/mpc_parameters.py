@@ -145,7 +145,8 @@ class MpcParameters:
           "feedback step from the new state (low latency); false: whole ticks", ro=True)
         d("max_extrapolation", float(st.max_extrapolation), "a state stamped up to this far "
           "(s) from the prepared tick time is predicted to it with the plan's acceleration; "
-          "further: a whole tick", float_range(0, 1), ro=True)
+          "further: a whole tick (0: no prediction; a timer tick takes the state of the "
+          "prepared time when one came)", float_range(0, 1), ro=True)
         d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
           "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)
         d("state_reliability", "reliable", "QoS reliability of the joint_states and odom "

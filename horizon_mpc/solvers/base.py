@@ -89,10 +89,9 @@ class Solver:
                             "those are in solver.stacked_solution", key, key, kind)
 
     def _progress(self, line: str) -> None:
-        """With the ``verbose`` option, one line of progress on stdout (logging at INFO is
+        """One line of progress on stdout, for the ``verbose`` option (logging at INFO is
         silent unless the caller configured logging: ``verbose`` then showed nothing)."""
-        if self.opts["verbose"]:
-            print(f"{self.name}: {line}", flush=True)  # noqa: T201
+        print(f"{self.name}: {line}", flush=True)  # noqa: T201
 
     @property
     def stacked_solution(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:

@@ -226,8 +226,9 @@ class GnSqpSolver(NlpSolver):
             history.append({"iteration": it, "cost": f, "violation": viol,
                             "stationarity": stat, "complementarity": comp, "step": step,
                             "alpha": alpha, "mu": mu})
-            self._progress(f"{it:3d} cost {f:.6e} viol {viol:.2e} stationarity {stat:.2e} "
-                           f"alpha {alpha:.3f}")
+            if o["verbose"]:  # alpha is None after a multipliers-only iteration
+                self._progress(f"{it:3d} cost {f:.6e} viol {viol:.2e} stationarity "
+                               f"{stat:.2e} alpha {alpha or 0.0:.3f}")
             if not (math.isfinite(f) and math.isfinite(viol) and np.isfinite(grad).all()):
                 status = ("not finite at the initial guess (NaN/inf in the guess or the "
                           "parameters)" if it == 0 else "not finite after a step")

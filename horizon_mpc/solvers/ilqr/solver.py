@@ -782,8 +782,9 @@ class IlqrSolver(Solver):
             history.append(rec)
             if o["callback"] is not None:
                 o["callback"](rec)
-            self._progress(f"{it:3d} cost {ev['cost']:.6e} viol {ev['viol']:.2e} alpha "
-                           f"{info['alpha']:.3f} mu {self.mu:.1e}")
+            if o["verbose"]:
+                self._progress(f"{it:3d} cost {ev['cost']:.6e} viol {ev['viol']:.2e} alpha "
+                               f"{info['alpha']:.3f} mu {self.mu:.1e}")
             if not rti and stationary and ev["viol"] <= o["tol_constraint"] and (
                     self._complementarity(ev) <= o["tol_complementarity"]):
                 status, converged = "converged", True
