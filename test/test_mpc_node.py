@@ -672,22 +672,21 @@ def test_the_executable_follows_the_sim_clock_unless_told_otherwise(tmp_path, wa
              (["--params-file", str(robot)], False),
              (["--params-file", str(shared), "-r", "__node:=other"], True))
     for args, expected in cases:
-        ctx = rclpy.Context()
-        rclpy.init(args=["mpc_node", "--ros-args", *args], context=ctx)
-        walking_mpc.t_last = None
-        try:
-            node = MpcNode(mpc=walking_mpc, context=ctx, sim_time_default=True)
-            assert node.get_parameter("use_sim_time").value is expected, args
-            node.destroy_node()
-        finally:
-            rclpy.try_shutdown(context=ctx)
+        assert _use_sim_time(walking_mpc, ["mpc_node", "--ros-args", *args]) is expected, args
     # the library class keeps rclpy's default (tests and embedding code choose)
+    assert _use_sim_time(walking_mpc, [], sim_time_default=False) is False
+
+
+def _use_sim_time(mpc: WalkingMpc, argv: list[str], sim_time_default: bool = True) -> bool:
+    """use_sim_time of an MpcNode built in a context initialised with ``argv``."""
     ctx = rclpy.Context()
-    rclpy.init(args=[], context=ctx)
+    rclpy.init(args=argv, context=ctx)
+    mpc.t_last = None
     try:
-        node = MpcNode(mpc=walking_mpc, context=ctx)
-        assert node.get_parameter("use_sim_time").value is False
+        node = MpcNode(mpc=mpc, context=ctx, sim_time_default=sim_time_default)
+        value = node.get_parameter("use_sim_time").value
         node.destroy_node()
+        return value
     finally:
         rclpy.try_shutdown(context=ctx)
 
@@ -1342,12 +1341,4 @@ def test_use_sim_time_outside_ros_args_is_no_parameter(walking_mpc):
     argument) and must not switch the sim-time default off either."""
     for args, expected in ((["mpc_node", "-p", "use_sim_time:=false"], True),
                            (["mpc_node", "--ros-args", "-p", "use_sim_time:=false"], False)):
-        ctx = rclpy.Context()
-        rclpy.init(args=args, context=ctx)
-        walking_mpc.t_last = None
-        try:
-            node = MpcNode(mpc=walking_mpc, context=ctx, sim_time_default=True)
-            assert node.get_parameter("use_sim_time").value is expected, args
-            node.destroy_node()
-        finally:
-            rclpy.try_shutdown(context=ctx)
+        assert _use_sim_time(walking_mpc, args) is expected, args
