@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import numbers
+import sys
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -27,6 +28,11 @@ import numpy as np
 from horizon_mpc.problem import Problem
 
 log = logging.getLogger(__name__)
+#: the ``verbose`` option's per-iteration lines: INFO records that reach stdout through a
+#: handler of their own (INFO is silent unless the caller configured logging, and
+#: ``verbose`` then showed nothing); not propagated, so a configured root does not repeat
+#: them
+progress_log = logging.getLogger("horizon_mpc.solvers.progress")
 
 __all__ = ["Solver", "SolverStats"]
 
@@ -53,6 +59,19 @@ class SolverStats:
         d = asdict(self)
         d.update(d.pop("extra"))
         return d
+
+
+class _StdoutHandler(logging.StreamHandler):
+    """A stream handler on whatever ``sys.stdout`` is when a record is emitted (a handler
+    bound once would keep writing to a stream replaced since, e.g. by a capture)."""
+
+    @property
+    def stream(self):  # noqa: D102
+        return sys.stdout
+
+    @stream.setter
+    def stream(self, _value) -> None:
+        pass
 
 
 class Solver:
@@ -89,9 +108,14 @@ class Solver:
                             "those are in solver.stacked_solution", key, key, kind)
 
     def _progress(self, line: str) -> None:
-        """One line of progress on stdout, for the ``verbose`` option (logging at INFO is
-        silent unless the caller configured logging: ``verbose`` then showed nothing)."""
-        print(f"{self.name}: {line}", flush=True)  # noqa: T201
+        """One line of progress for the ``verbose`` option (:data:`progress_log`)."""
+        if not progress_log.handlers:
+            handler = _StdoutHandler()
+            handler.setFormatter(logging.Formatter("%(message)s"))
+            progress_log.addHandler(handler)
+            progress_log.setLevel(logging.INFO)
+            progress_log.propagate = False
+        progress_log.info("%s: %s", self.name, line)
 
     @property
     def stacked_solution(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
