@@ -255,8 +255,8 @@ class WalkingMpc:
         The next :meth:`update` then only rolls the prepared feedback law out from its
         measured state: a state stamped up to ``settings.max_extrapolation`` away from
         ``t_next`` is first predicted to ``t_next`` with the plan's acceleration, and the
-        plan starts at ``t_next``; a state further away gets a whole tick. Returns whether a step is
-        prepared (False: the next update runs a whole tick).
+        plan starts at ``t_next``; a state further away gets a whole tick. Returns whether a
+        step is prepared (False: the next update runs a whole tick).
         """
         if self.t_last is None:
             raise RuntimeError("prepare() needs a started controller (start() or update())")
@@ -265,7 +265,7 @@ class WalkingMpc:
         cmd = self._checked_command(cmd)
         dt_tick = max(t_next - self.t_last, 0.0)
         self._ramp_command(cmd, dt_tick)
-        a_guess = self.wp.prb.get_variable("a")
+        a_guess = self.wp.a
         # the planned acceleration just before t_next, of the node whose interval ends there
         # (node k-1 for a tick of k nodes): the feedback's prediction of a state measured a
         # little before t_next (the one after it: below, once the warm start is final)

@@ -7,7 +7,15 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-__all__ = ["declare", "float_range", "int_range"]
+__all__ = ["declare", "float_range", "int_range", "parameter_overrides"]
+
+
+def parameter_overrides(node: Node) -> dict[str, Parameter]:
+    """The start-up values given for ``node`` (``-p``, params-file sections matching it,
+    code's ``parameter_overrides``), as rcl resolved them: rclpy's own dict, in place
+    (rclpy keeps it in a private attribute; empty if a version lacks it)."""
+    overrides = getattr(node, "_parameter_overrides", None)
+    return overrides if isinstance(overrides, dict) else {}
 
 
 def float_range(lo: float, hi: float) -> list[FloatingPointRange]:
@@ -35,8 +43,8 @@ def declare(node: Node, name: str, default: object, description: str,
         desc.floating_point_range = rng
     if irng:
         desc.integer_range = irng
-    overrides = getattr(node, "_parameter_overrides", None)  # rclpy's start-up values
-    given = overrides.get(name) if isinstance(overrides, dict) else None
+    overrides = parameter_overrides(node)
+    given = overrides.get(name)
     if (isinstance(default, float) and given is not None
             and given.type_ == Parameter.Type.INTEGER):
         overrides[name] = Parameter(name, value=float(given.value))

@@ -37,6 +37,7 @@ from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.model import RobotModel
 from horizon_mpc.mpc.controller import Plan, WalkingMpc
 from horizon_mpc.nodes.conversions import NS_PER_S, time_to_ns
+from horizon_mpc.nodes.declare import parameter_overrides
 from horizon_mpc.nodes.mpc_inputs import (
     base_from_odometry,
     command_from_twist,
@@ -244,7 +245,7 @@ class MpcNode(MpcParameters, Node):
         overrides. (Guessing from the command line took another node's section or
         ``-p sim:use_sim_time:=...`` for this node's: it stayed on the wall clock and never
         planned from the simulator's states.)"""
-        if "use_sim_time" not in getattr(self, "_parameter_overrides", {}):
+        if "use_sim_time" not in parameter_overrides(self):
             self.set_parameters([Parameter("use_sim_time", value=True)])
 
     def now(self) -> float:
@@ -310,7 +311,6 @@ class MpcNode(MpcParameters, Node):
             self._cmd = None
             self._warn("cmd_timeout", f"the clock went back {-age:.3f} s since the last "
                        "cmd_vel: dropped it; commanding zero velocity")
-            self._cmd_timed_out = True
         if self._cmd is None or age > self.cmd_timeout:
             if self._cmd is not None and not self._cmd_timed_out:
                 self._warn("cmd_timeout", f"no cmd_vel for more than {self.cmd_timeout:g} s; "

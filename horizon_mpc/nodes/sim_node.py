@@ -137,19 +137,19 @@ class SimNode(Node):
         # physics steps from an answer's stamp until it takes effect (plus a seeded uniform
         # jitter), and from a state to the next control grid time (checked before the
         # simulator is built)
-        delays = {name: par(name) for name in LOCKSTEP_DELAYS}
-        if not par("lockstep"):  # real time has delays of its own
-            delays = dict.fromkeys(LOCKSTEP_DELAYS, 0.0)
-        self._latency_steps, self._jitter_steps, self._offset_steps = (
-            math.floor(delays[name] * physics_rate + 0.5) for name in LOCKSTEP_DELAYS)
+        self._steps_per_control = max(1, round(par("control_period") * physics_rate))
+        # (real time has delays of its own: there they are 0)
+        delays = {name: par(name) if par("lockstep") else 0.0 for name in LOCKSTEP_DELAYS}
+        delay_steps = {name: math.floor(d * physics_rate + 0.5) for name, d in delays.items()}
+        self._latency_steps, self._jitter_steps, self._offset_steps = delay_steps.values()
         self._rng = random.Random(par("lockstep_seed"))
-        control_steps = max(1, round(par("control_period") * physics_rate))
-        delay_steps = self._latency_steps + self._jitter_steps + self._offset_steps
-        if delay_steps and delay_steps >= control_steps:
+        total = sum(delay_steps.values())
+        if total and total >= self._steps_per_control:
             raise ValueError(
                 "lockstep_latency + lockstep_latency_jitter + lockstep_state_offset must be "
-                f"shorter than control_period: {delay_steps} against {control_steps} physics "
-                f"steps of {1 / physics_rate:g} s (each delay is rounded to whole steps)")
+                f"shorter than control_period: {total} against {self._steps_per_control} "
+                f"physics steps of {1 / physics_rate:g} s (each delay is rounded to whole "
+                "steps)")
         # robot_description (URDF text): pybullet and Pinocchio load files, so the text goes
         # to a temporary file for the node's lifetime
         self._description_file = description_file(par("robot_description"))
@@ -183,14 +183,11 @@ class SimNode(Node):
         self.lockstep_timeout = par("lockstep_timeout")
         self.push_duration = par("push_duration")
         self._steps_per_state = max(1, round(physics_rate / par("state_rate")))
-        self._steps_per_control = max(1, round(par("control_period") * physics_rate))
         for name, steps, period in (("state_rate", self._steps_per_state, 1 / par("state_rate")),
                                     ("control_period", self._steps_per_control,
                                      par("control_period")),
-                                    *((name, steps, delays[name]) for name, steps in zip(
-                                        LOCKSTEP_DELAYS, (self._latency_steps,
-                                                          self._jitter_steps,
-                                                          self._offset_steps), strict=True))):
+                                    *((name, delay_steps[name], delays[name])
+                                      for name in LOCKSTEP_DELAYS)):
             if abs(steps * self.sim.dt - period) > 1e-9:
                 self.get_logger().warning(
                     f"{name}: {period:g} s is not a whole number of physics steps; "

@@ -19,6 +19,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from horizon_mpc.nodes.declare import parameter_overrides
+
 __all__ = ["forward_library_warnings", "spin_until_signal", "split_arguments",
            "undeclared_overrides", "unmatched_params_file_sections"]
 
@@ -146,8 +148,7 @@ def undeclared_overrides(node: Node) -> list[str]:
     """The parameters set for ``node`` (``-p``, params-file sections matching it, resolved
     by rcl) that it never declared, sorted: rclpy ignores them without a word (``max_xv``
     for ``max_vx`` left the default limit)."""
-    overrides = getattr(node, "_parameter_overrides", {})  # rclpy's resolved overrides
-    return sorted(n for n in overrides if not node.has_parameter(n))
+    return sorted(n for n in parameter_overrides(node) if not node.has_parameter(n))
 
 
 def _node_keys(data: object, prefix: list[str]) -> list[str]:
