@@ -20,6 +20,12 @@ numbers) with one warning that says why. A compiler whose Python process dies (S
 SIGKILL) is killed with its whole process group, and build folders left by a killed process
 are removed by later builds.
 
+The cache is bounded: loading a library marks it used (its modification time), and after
+each build the least recently used libraries are deleted while the cache holds more than
+``$HORIZON_MPC_CACHE_MAX_MB`` (default 2048; 0 disables the bound), sparing those this
+process loaded and any used in the last ten minutes. ``python -m horizon_mpc.codegen info``
+reports the cache, ``prune [--max-mb N]`` bounds it now, ``clear`` empties it.
+
 Set ``HORIZON_MPC_NO_CODEGEN=1`` to get ``fn`` back unchanged (debugging, or no compiler).
 """
 
@@ -29,6 +35,7 @@ import contextlib
 import ctypes
 import hashlib
 import logging
+import math
 import os
 import platform
 import re
@@ -51,9 +58,12 @@ __all__ = [
     "STATS",
     "BufferedFunction",
     "CC_ARGV",
+    "CacheInfo",
     "CompileStats",
     "arch_flags",
     "build_shared_library",
+    "cache_info",
+    "cache_max_bytes",
     "codegen_enabled",
     "compile_function",
     "compiled_library",
@@ -61,6 +71,8 @@ __all__ = [
     "forget_loaded",
     "function_name",
     "library_damage",
+    "mark_used",
+    "prune_cache",
 ]
 
 _log = logging.getLogger(__name__)
@@ -238,6 +250,7 @@ def compile_function(
         if lib.is_file():
             _log.debug("loading %s from the cache (%s)", fn.name(), lib)
             STATS.loaded += 1
+            mark_used(lib)
         else:
             _build(fn, lib)
     except OSError as exc:  # no compiler, a cache folder that cannot be written
@@ -357,9 +370,107 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
         os.replace(tmp_lib, lib)  # atomic within one file system
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    try:
+        prune_cache(lib.parent, keep=(lib,))
+    except ValueError as exc:  # a malformed bound must not fail the build
+        if str(exc) not in _UNCOMPILED_WARNED:
+            _UNCOMPILED_WARNED.add(str(exc))
+            _log.warning("%s: the cache is not pruned", exc)
 
 
 STALE_BUILD_S = 3600.0  # a build folder this old was left by a killed process
+#: libraries used this recently are never pruned (another process may be loading them)
+PRUNE_SPARE_S = 600.0
+_DEFAULT_CACHE_MAX_MB = 2048.0
+
+
+def mark_used(lib: Path) -> None:
+    """Record that ``lib`` was used now (its modification time: the pruning's order)."""
+    with contextlib.suppress(OSError):
+        os.utime(lib)
+
+
+def cache_max_bytes() -> int | None:
+    """The cache bound of ``$HORIZON_MPC_CACHE_MAX_MB`` (MB, default 2048), None when 0.
+
+    Raises:
+        ValueError: the variable is not a number >= 0.
+    """
+    text = os.environ.get("HORIZON_MPC_CACHE_MAX_MB", "").strip()
+    try:
+        mb = float(text) if text else _DEFAULT_CACHE_MAX_MB
+    except ValueError:
+        mb = math.nan
+    if not mb >= 0.0 or math.isinf(mb):
+        raise ValueError(f"HORIZON_MPC_CACHE_MAX_MB must be a number of MB >= 0 (0: no "
+                         f"bound), got {text!r}")
+    return int(mb * 1e6) if mb > 0 else None
+
+
+@dataclass
+class CacheInfo:
+    """What a cache folder holds: ``libraries`` (count), ``bytes``, and the modification
+    times (s since the epoch) of the least and most recently used library."""
+
+    folder: Path
+    libraries: int
+    bytes: int
+    oldest: float | None
+    newest: float | None
+
+
+def _libraries(folder: Path) -> list[tuple[float, int, Path]]:
+    """(mtime, size, path) of the cache's libraries, least recently used first."""
+    out = []
+    for lib in folder.glob("*.so"):
+        with contextlib.suppress(OSError):
+            st = lib.stat()
+            out.append((st.st_mtime, st.st_size, lib))
+    return sorted(out)
+
+
+def cache_info(folder: str | Path | None = None) -> CacheInfo:
+    """The libraries of the cache ``folder`` (default :func:`default_cache_dir`)."""
+    folder = Path(folder).expanduser() if folder is not None else default_cache_dir()
+    libs = _libraries(folder) if folder.is_dir() else []
+    return CacheInfo(folder, len(libs), sum(size for _, size, _ in libs),
+                     libs[0][0] if libs else None, libs[-1][0] if libs else None)
+
+
+def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
+                keep: tuple[Path, ...] = (), spare_s: float = PRUNE_SPARE_S) -> list[Path]:
+    """Delete the least recently used libraries of ``folder`` (default
+    :func:`default_cache_dir`) while it holds more than ``max_bytes`` (-1: the bound of
+    :func:`cache_max_bytes`; None: no bound, nothing deleted). Spared: ``keep``, the
+    libraries this process loaded and those used in the last ``spare_s`` seconds (a
+    process that already loaded a deleted library keeps it; one about to load it rebuilds
+    it). Returns the deleted paths.
+
+    Raises:
+        ValueError: a malformed ``$HORIZON_MPC_CACHE_MAX_MB`` (with ``max_bytes`` -1).
+    """
+    folder = Path(folder).expanduser() if folder is not None else default_cache_dir()
+    if max_bytes == -1:
+        max_bytes = cache_max_bytes()
+    if max_bytes is None or not folder.is_dir():
+        return []
+    libs = _libraries(folder)
+    total = sum(size for _, size, _ in libs)
+    spared = {str(p) for p in keep} | set(_LOADED)
+    now, deleted = time.time(), []
+    for mtime, size, lib in libs:
+        if total <= max_bytes:
+            break
+        if str(lib) in spared or now - mtime < spare_s:
+            continue
+        with contextlib.suppress(FileNotFoundError):  # another process pruned it
+            lib.unlink()
+            deleted.append(lib)
+        total -= size
+    if deleted:
+        _log.info("codegen cache %s: removed %d least recently used libraries (bound %.0f MB, "
+                  "HORIZON_MPC_CACHE_MAX_MB)", folder, len(deleted), max_bytes / 1e6)
+    return deleted
 
 
 def _remove_stale_builds(folder: Path) -> None:
@@ -464,3 +575,41 @@ class BufferedFunction:
         if self._buffer.ret() != 0:
             raise RuntimeError(f"evaluating {self.fn.name()} failed")
         return self.outputs
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m horizon_mpc.codegen {info,prune,clear} [--dir D] [--max-mb N]``: the
+    compiled-code cache's size, bounding it now, emptying it."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m horizon_mpc.codegen",
+                                     description=main.__doc__.split(":", 1)[1].strip())
+    parser.add_argument("command", choices=("info", "prune", "clear"))
+    parser.add_argument("--dir", default=None, help="cache folder (default: "
+                        f"{default_cache_dir()})")
+    parser.add_argument("--max-mb", type=float, default=None,
+                        help="prune: the bound in MB (default $HORIZON_MPC_CACHE_MAX_MB or "
+                        f"{_DEFAULT_CACHE_MAX_MB:g})")
+    args = parser.parse_args(argv)
+    if args.max_mb is not None and not args.max_mb >= 0:
+        parser.error(f"--max-mb must be >= 0, got {args.max_mb}")
+    try:
+        if args.command == "clear":
+            removed = prune_cache(args.dir, max_bytes=0, spare_s=0.0)
+        elif args.command == "prune":
+            bound = cache_max_bytes() if args.max_mb is None else int(args.max_mb * 1e6)
+            removed = prune_cache(args.dir, max_bytes=bound)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.command != "info":
+        print(f"removed {len(removed)} libraries")
+    info = cache_info(args.dir)
+    when = (time.strftime("%Y-%m-%d %H:%M", time.localtime(info.oldest))
+            if info.oldest is not None else "-")
+    print(f"{info.folder}: {info.libraries} libraries, {info.bytes / 1e6:.1f} MB "
+          f"(least recently used {when})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import casadi as ca
@@ -308,3 +309,79 @@ def test_a_killed_process_takes_its_compiler_with_it(tmp_path):
         while compilers():
             assert time.monotonic() < end, f"compiler left running after {sig.name}"
             time.sleep(0.05)
+
+
+# --------------------------------------------------------------------------------------------
+# the cache's bound: least recently used libraries go first
+
+def _fake_libraries(folder: Path, ages_s: dict[str, float], size: int = 1000) -> None:
+    """Files named like cached libraries, last used ``ages_s`` seconds ago."""
+    now = time.time()
+    for name, age in ages_s.items():
+        path = folder / f"{name}.so"
+        path.write_bytes(b"\0" * size)
+        os.utime(path, (now - age, now - age))
+
+
+def test_prune_removes_the_least_recently_used_libraries_down_to_the_bound(cache):
+    _fake_libraries(cache, {"old": 9000, "older": 9500, "recent": 3000, "fresh": 60})
+    removed = codegen.prune_cache(cache, max_bytes=2500)
+    assert sorted(p.name for p in removed) == ["old.so", "older.so"]
+    assert sorted(p.name for p in cache.glob("*.so")) == ["fresh.so", "recent.so"]
+    assert codegen.prune_cache(cache, max_bytes=2500) == []  # within the bound now
+
+
+def test_prune_spares_recent_kept_and_unbounded(cache):
+    _fake_libraries(cache, {"a": 9000, "b": 8000, "c": 100})  # c: used in the last 10 min
+    assert codegen.prune_cache(cache, max_bytes=None) == []
+    removed = codegen.prune_cache(cache, max_bytes=0, keep=(cache / "a.so",))
+    assert [p.name for p in removed] == ["b.so"]
+    assert sorted(p.name for p in cache.glob("*.so")) == ["a.so", "c.so"]
+
+
+def test_loading_from_the_cache_marks_the_library_used(cache):
+    fn = _small_function()
+    codegen.compile_function(fn)
+    (lib,) = cache.glob("small_*.so")
+    os.utime(lib, (1e9, 1e9))
+    codegen.forget_loaded()
+    codegen.compile_function(fn)
+    assert time.time() - lib.stat().st_mtime < 60
+
+
+def test_a_build_prunes_the_cache_to_the_environment_bound(cache, monkeypatch):
+    _fake_libraries(cache, {"stale": 9000}, size=5000)
+    monkeypatch.setenv("HORIZON_MPC_CACHE_MAX_MB", "0.001")  # 1000 bytes
+    codegen.compile_function(_small_function())
+    # the stale library went; the new one stays although it alone exceeds the bound
+    assert [p.name.split("_")[0] for p in cache.glob("*.so")] == ["small"]
+
+
+@pytest.mark.parametrize("text", ["x", "-1", "inf", "nan"])
+def test_a_malformed_bound_is_an_error_that_names_the_variable_but_builds_go_on(
+        cache, monkeypatch, text, caplog):
+    monkeypatch.setenv("HORIZON_MPC_CACHE_MAX_MB", text)
+    with pytest.raises(ValueError, match="HORIZON_MPC_CACHE_MAX_MB"):
+        codegen.cache_max_bytes()
+    x = ca.SX.sym("x")
+    fn = codegen.compile_function(ca.Function("doubled", [x], [2 * x]))
+    assert float(fn(3.0)) == 6.0
+    assert "the cache is not pruned" in caplog.text
+
+
+def test_cache_command_line_reports_prunes_and_clears(cache):
+    _fake_libraries(cache, {"a": 9000, "b": 8000}, size=2_000_000)
+    cmd = [sys.executable, "-m", "horizon_mpc.codegen"]
+    env = {**os.environ, "HORIZON_MPC_CACHE_DIR": str(cache)}
+    info = subprocess.run([*cmd, "info"], env=env, capture_output=True, text=True, timeout=120)
+    assert info.returncode == 0 and "2 libraries, 4.0 MB" in info.stdout, info.stdout
+    prune = subprocess.run([*cmd, "prune", "--max-mb", "3"], env=env, capture_output=True,
+                           text=True, timeout=120)
+    assert prune.returncode == 0 and "removed 1 libraries" in prune.stdout, prune.stdout
+    assert [p.name for p in cache.glob("*.so")] == ["b.so"]
+    clear = subprocess.run([*cmd, "clear"], env=env, capture_output=True, text=True,
+                           timeout=120)
+    assert clear.returncode == 0 and "0 libraries" in clear.stdout
+    bad = subprocess.run([*cmd, "prune", "--max-mb", "-2"], env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert bad.returncode == 2 and "--max-mb" in bad.stderr

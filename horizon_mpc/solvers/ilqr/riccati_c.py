@@ -123,6 +123,7 @@ def _load() -> ctypes.CDLL:
                 lib.unlink(missing_ok=True)
             if not lib.is_file():
                 _build(lib)
+            codegen.mark_used(lib)
             try:
                 _lib = _bind(ctypes.CDLL(str(lib)))
             except OSError as err:  # a damaged cache entry: build it again, once
