@@ -588,11 +588,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--dir", default=None, help="cache folder (default: "
                         f"{default_cache_dir()})")
     parser.add_argument("--max-mb", type=float, default=None,
-                        help="prune: the bound in MB (default $HORIZON_MPC_CACHE_MAX_MB or "
-                        f"{_DEFAULT_CACHE_MAX_MB:g})")
+                        help="prune: the bound in MB, > 0 (default $HORIZON_MPC_CACHE_MAX_MB "
+                        f"or {_DEFAULT_CACHE_MAX_MB:g}); `clear` empties the cache")
     args = parser.parse_args(argv)
-    if args.max_mb is not None and not args.max_mb >= 0:
-        parser.error(f"--max-mb must be >= 0, got {args.max_mb}")
+    if args.max_mb is not None and not (0 < args.max_mb < math.inf):
+        parser.error(f"--max-mb must be a number of MB > 0, got {args.max_mb:g} (`clear` "
+                     "empties the cache; HORIZON_MPC_CACHE_MAX_MB=0 leaves it unbounded)")
+    bound = None
     try:
         if args.command == "clear":
             removed = prune_cache(args.dir, max_bytes=0, spare_s=0.0)
@@ -608,6 +610,14 @@ def main(argv: list[str] | None = None) -> int:
             if info.oldest is not None else "-")
     print(f"{info.folder}: {info.libraries} libraries, {info.bytes / 1e6:.1f} MB "
           f"(least recently used {when})")
+    if args.command == "prune" and bound is None:
+        print("no bound (HORIZON_MPC_CACHE_MAX_MB=0): nothing to prune")
+    elif args.command == "prune" and info.bytes > bound:
+        recent = sum(time.time() - mtime < PRUNE_SPARE_S
+                     for mtime, _, _ in _libraries(info.folder))
+        print(f"still above the bound of {bound / 1e6:g} MB: {recent} libraries used in the "
+              f"last {PRUNE_SPARE_S / 60:g} minutes are spared (another process may be "
+              "loading them)")
     return 0
 
 

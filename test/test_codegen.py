@@ -382,6 +382,19 @@ def test_cache_command_line_reports_prunes_and_clears(cache):
     clear = subprocess.run([*cmd, "clear"], env=env, capture_output=True, text=True,
                            timeout=120)
     assert clear.returncode == 0 and "0 libraries" in clear.stdout
-    bad = subprocess.run([*cmd, "prune", "--max-mb", "-2"], env=env, capture_output=True,
-                         text=True, timeout=120)
-    assert bad.returncode == 2 and "--max-mb" in bad.stderr
+    for bound in ("-2", "0", "inf"):  # 0 would read as "unbounded" (the variable's meaning)
+        bad = subprocess.run([*cmd, "prune", "--max-mb", bound], env=env, capture_output=True,
+                             text=True, timeout=120)
+        assert bad.returncode == 2 and "--max-mb" in bad.stderr, bound
+
+
+def test_cache_command_line_says_what_it_spared_or_that_there_is_no_bound(cache):
+    _fake_libraries(cache, {"a": 9000, "b": 60}, size=2_000_000)
+    cmd = [sys.executable, "-m", "horizon_mpc.codegen", "prune"]
+    env = {**os.environ, "HORIZON_MPC_CACHE_DIR": str(cache)}
+    out = subprocess.run([*cmd, "--max-mb", "1"], env=env, capture_output=True, text=True,
+                         timeout=120).stdout
+    assert "removed 1 libraries" in out and "1 libraries used in the last 10 minutes" in out
+    env["HORIZON_MPC_CACHE_MAX_MB"] = "0"
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120).stdout
+    assert "removed 0 libraries" in out and "no bound" in out

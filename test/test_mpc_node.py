@@ -907,8 +907,8 @@ def test_prepare_ahead_ticks_are_feedback_steps_stamped_at_their_plan_time(conte
     10 ms off (past max_extrapolation) gets a whole tick stamped with the state's time."""
     node = sim_time_node(context, walking_mpc, prepare_ahead=True, max_extrapolation=0.005)
     try:
-        sent = Sent()
-        node._pub_traj, node._pub_path, node._pub_diag = sent, Sent(), Sent()
+        sent, sent_diag = Sent(), Sent()
+        node._pub_traj, node._pub_path, node._pub_diag = sent, Sent(), sent_diag
         _, q = standing_configuration(node.mpc.cfg)
         start, period = 10 * NS_PER_S, 20_000_000
         misses = node.mpc.prepare_misses
@@ -927,10 +927,14 @@ def test_prepare_ahead_ticks_are_feedback_steps_stamped_at_their_plan_time(conte
         # one late state: counted, not warned about (it suggested a misconfiguration 13
         # times in 47 s of a correct sim_node + mpc_node run); most of them late: warned
         assert "prepare_miss" not in node._last_warn
+        assert node._last_diag[1] == DiagnosticStatus.OK
         late = start + len(offsets) * period + 10_000_000
         for k in range(12):
             _feed_state(node, late + k * period + (7_000_000 if k % 2 else 0), q)
         assert "prepare_miss" in node._last_warn
+        # the diagnostics say so too, at WARN (the plans are still sent)
+        status = sent_diag.msgs[-1].status[0]
+        assert status.level == DiagnosticStatus.WARN and "prepare misses" in status.message
     finally:
         walking_mpc.settings.prepare_ahead = False  # the fixture is shared
         node.destroy_node()

@@ -469,13 +469,12 @@ class MpcNode(MpcParameters, Node):
                 self._recent_misses.append(self.mpc.prepare_misses > misses)
                 # a late state now and then (a loaded simulator) costs one whole tick and is
                 # counted (diagnostics prepare_misses); warned about when it is the rule
-                if self._recent_misses[-1] and sum(self._recent_misses) > MISS_WARN_SHARE \
-                        * self._recent_misses.maxlen:
+                if self._recent_misses[-1] and self._misses_are_the_rule():
                     self._warn("prepare_miss", f"state stamped {t:.4f} s, "
                                f"{abs(self._prepared_ns - stamp_ns) / 1e6:.1f} ms from the "
-                               f"prepared tick time: ran a whole tick ({sum(self._recent_misses)}"
-                               f" of the last {len(self._recent_misses)} ticks; is "
-                               "control_rate the rate of the states/ticks?)")
+                               f"prepared tick time: ran a whole tick ({self._misses_text()}): "
+                               "states come off the tick times (a loaded machine delays "
+                               "them, or control_rate is not their rate)")
         except Exception as exc:  # noqa: BLE001 - the node must outlive any solver error
             self.solver_errors += 1
             self._warn("solver", f"MPC tick failed ({type(exc).__name__}: {exc}); "
@@ -508,6 +507,13 @@ class MpcNode(MpcParameters, Node):
                        f"{self.period * 1e3:.1f} ms ({self.deadline_misses} misses)")
         self._publish_diagnostics(plan, plan_ns, now_ns)
         return True
+
+    def _misses_are_the_rule(self) -> bool:
+        """More than MISS_WARN_SHARE of the recent ticks were prepare misses."""
+        return sum(self._recent_misses) > MISS_WARN_SHARE * self._recent_misses.maxlen
+
+    def _misses_text(self) -> str:
+        return f"{sum(self._recent_misses)} of the last {len(self._recent_misses)} ticks"
 
     # ------------------------------------------------------------------ outputs
     def trajectory_msg(self, plan: Plan, stamp_ns: int) -> JointTrajectory:
@@ -554,6 +560,10 @@ class MpcNode(MpcParameters, Node):
                            f"{limit:.3g}, {INFEASIBLE_PLAN:g} of the weight): the robot may be "
                            "falling")
                 self._warn("infeasible", message)
+            elif ok and self._misses_are_the_rule():
+                level = DiagnosticStatus.WARN
+                message = (f"prepare misses in {self._misses_text()}: whole ticks, late "
+                           "states (a loaded machine?)")
             self._solve_time_max = max(self._solve_time_max, self.last_solve_time)
         now_ns = self.get_clock().now().nanoseconds if now_ns is None else now_ns
         last = self._last_diag  # a rising level (OK -> WARN) goes out at once
