@@ -24,7 +24,7 @@ DEPS_STAMP := $(VENV)/.horizon_mpc-deps-$(DEPS_HASH)
 DATA_STAMP := $(VENV)/.horizon_mpc-data.stamp
 DATA_FILES := package.xml resource/horizon_mpc $(wildcard scripts/*) $(wildcard config/*.yaml) \
 	$(wildcard config/motions/*.yaml config/commands/*.yaml) \
-	$(wildcard launch/*.py launch/*.xml launch/*.yaml)
+	$(wildcard launch/*.py launch/*.xml launch/*.yaml) $(wildcard doc/*.md)
 
 # Comparison peer for the benchmarks: Crocoddyl crashes with pin 4.1, so it gets its own venv
 # with pin 4.0 (see doc/benchmarks.md).

@@ -82,6 +82,7 @@ setup(
         (f"share/{PACKAGE}/config/commands", sorted(glob("config/commands/*.yaml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.py") + glob("launch/*.xml")
                                            + glob("launch/*.yaml"))),
+        (f"share/{PACKAGE}/doc", sorted(glob("doc/*.md"))),  # what --help texts refer to
         (f"lib/{PACKAGE}", [f"scripts/{name}" for name in EXECUTABLES]),
     ],
     install_requires=INSTALL_REQUIRES,

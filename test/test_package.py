@@ -24,7 +24,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "horizon_mpc"
 SOURCE_ITEMS = ["setup.py", "setup.cfg", "pyproject.toml", "package.xml", "Makefile",
-                "resource", "scripts", "config", "launch", PACKAGE]
+                "resource", "scripts", "config", "launch", "doc", PACKAGE]
 
 
 def _setup_py_constant(name: str):
@@ -248,6 +248,9 @@ def test_colcon_style_install_puts_executables_in_lib_and_registers_the_package(
         "*.yaml")) == sorted(str(p.relative_to(ROOT / "config"))
                              for p in (ROOT / "config").rglob("*.yaml"))
     assert _get_package_prefix([str(prefix)]) == prefix
+    # the design notes the --help texts refer to
+    assert sorted(p.name for p in (share / "doc").glob("*.md")) == sorted(
+        p.name for p in (ROOT / "doc").glob("*.md"))
     # the installed code finds its data through the ament index, not the source tree
     site = next(prefix.glob("lib/python3*/site-packages"))
     probe = ("import horizon_mpc, sys; from horizon_mpc.closed_loop_profile import "

@@ -645,7 +645,7 @@ def usage() -> str:
              wrap("Parameters (library defaults; a robot config's mpc: section overrides "
                   "them). [live]: also changed while running (ros2 param set); the others "
                   "at start-up only. use_sim_time defaults to true. Details: "
-                  "doc/mpc_node.md."), ""]
+                  "doc/mpc_node.md (installed in share/horizon_mpc/doc)."), ""]
     for name, default, description, read_only in parameter_table():
         lines.append(f"  {name} (default {default!r}){'' if read_only else ' [live]'}")
         lines.append(textwrap.fill(description, width=92, initial_indent=" " * 6,

@@ -435,8 +435,8 @@ def usage() -> str:
              "--params-file FILE]", "",
              textwrap.fill(f"The PyBullet simulator of a robot config as a ROS 2 node: {text}",
                            width=92), "",
-             textwrap.fill("Parameters, all read at start-up (details: doc/simulator.md):",
-                           width=92), ""]
+             textwrap.fill("Parameters, all read at start-up (details: doc/simulator.md, "
+                           "installed in share/horizon_mpc/doc):", width=92), ""]
     for name, default, description, *_ in SIM_PARAMETERS:
         shown = "unset" if isinstance(default, Parameter.Type) else repr(default)
         lines.append(f"  {name} (default {shown})")
