@@ -56,6 +56,7 @@ from horizon_mpc.nodes.mpc_process import (
     MpcProcess,
     MpcProcessError,
     TickRecord,
+    default_domain_id,
     private_domain_id,
     process_cpu_seconds,
     process_memory_mb,
@@ -588,10 +589,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         log.error("cannot run: %s", message)
         return 2
-    log.info("closed loop: %s, %s, profile %s", args.robot, args.mode, profile)
+    domain_id = args.domain_id
+    if domain_id is None:  # run()'s defaults, resolved here to be told
+        domain_id = private_domain_id() if args.mode == "lockstep" else default_domain_id()
+    log.info("closed loop: %s, %s, profile %s, ROS_DOMAIN_ID %d%s", args.robot, args.mode,
+             profile, domain_id, " (this run's own; --domain-id to choose)"
+             if args.domain_id is None and args.mode == "lockstep" else "")
     try:
         rec = run(args.robot, segments, args.duration, args.mode, args.gif, args.iterations,
-                  pushes=pushes, mpc_parameters=mpc_parameters, domain_id=args.domain_id,
+                  pushes=pushes, mpc_parameters=mpc_parameters, domain_id=domain_id,
                   sim_parameters=sim_parameters)
     except KeyboardInterrupt:
         log.error("interrupted before the run started: no outputs written")
