@@ -119,7 +119,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     files = write_outputs(res, cfg, out, effort_limit=model.joint_effort_limit,
                           animation=not args.no_animation, extra=extra, **render)
     ok = bool(res.stats.get("success", True))
-    print(f"{args.motion}: {'solved' if ok else 'NOT solved'} in {wall:.1f} s; "
+    solver_time = res.stats.get("time")
+    inner = (f" (the solver's own {solver_time:.1f} s, the rest building the problem)"
+             if isinstance(solver_time, float) and solver_time < wall else "")
+    print(f"{args.motion}: {'solved' if ok else 'NOT solved'} in {wall:.1f} s{inner}; "
           f"outputs in {out}: {', '.join(p.name for p in files.values())}")
     for key, value in res.summary.items():
         if not isinstance(value, list) or len(value) <= 4:
