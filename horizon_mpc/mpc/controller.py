@@ -487,10 +487,35 @@ class WalkingMpc:
         st = self.settings
         self.pose_ref = advance_pose(self.pose_ref, self.cmd, q, dt, st.pose_leash, st.yaw_leash)
 
+    def _velocity_reference(self) -> list[float]:
+        """The base velocity reference ``(vx, vy, wz)`` (base frame) of the horizon: while
+        walking, the ramped command plus the pose error (reference pose minus the measured
+        one, node 0) closed over the horizon, within the command limits; standing, the
+        ramped command.
+
+        The pose reference is the integral action of velocity tracking, but a velocity
+        reference of the bare command fought it: a correction of the pose is a velocity
+        off the command, which the velocity cost (weights 40-100 against 50 for the
+        position) resisted, so a drift held the robot 0.06-0.10 m off its pose reference
+        for seconds (go2: 0.036 m/s for 0.02, 0.012-0.024 m/s in x for a lateral command;
+        0.07-0.13 rad short of a 1.5 rad turn; doc/locomotion.md). With the error closed over
+        the horizon, velocity and pose references agree at the horizon's end."""
+        vx, vy, wz = (float(c) for c in self.cmd)
+        if not self.scheduler.walking:
+            # feet down: the base cannot walk to a pose (moving it on planted feet slid them)
+            return [vx, vy, wz]
+        x, y, yaw = self._pose_expected  # node 0: the measured (or predicted) state
+        ex, ey = float(self.pose_ref[0]) - x, float(self.pose_ref[1]) - y
+        c, s = math.cos(yaw), math.sin(yaw)
+        horizon = self.wp.n_nodes * self.settings.dt
+        v = [vx + (c * ex + s * ey) / horizon, vy + (c * ey - s * ex) / horizon,
+             wz + wrap_angle(float(self.pose_ref[2]) - yaw) / horizon]
+        return list(limit_command(v, self.velocity_limits, self.settings.max_command_norm))
+
     def _set_references(self, t: float) -> None:
         wp, st = self.wp, self.settings
         N, dt = wp.n_nodes, st.dt
-        vx, vy, wz = self.cmd
+        vx, vy, wz = self._velocity_reference()
         wp.v_ref.assign([vx, vy, 0.0, 0.0, 0.0, wz])
         wp.pose_ref.assign(horizon_poses(self.pose_ref, self.cmd, N, dt))
         sched = self.scheduler.schedule(t, N, dt)
