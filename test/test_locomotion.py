@@ -468,12 +468,14 @@ def test_no_gait_change_puts_a_swinging_foot_down(change):
 
 def test_slower_gait_cycles_get_a_share_of_the_velocity_limits():
     """The limits of a robot config are its gait's (trot): the walk (a cycle twice as long at
-    one step duration) fell at them (anymal_c at 0.4-0.5 m/s forward, a1 at 0.4 m/s
-    sideways) and walks at half of them."""
+    one step duration, a foot down 0.75 of it: three times the trot's stance) fell at them
+    (anymal_c at 0.4-0.5 m/s forward, a1 at 0.4 m/s sideways) and gets a third of them."""
     from horizon_mpc.locomotion import speed_scale
 
     trot = make_gait("trot", 0.3)
-    assert speed_scale(make_gait("walk", 0.3), trot) == pytest.approx(0.5)
+    assert speed_scale(make_gait("walk", 0.3), trot) == pytest.approx(1 / 3)
+    assert speed_scale(make_gait("walk", 0.3, duty_factor=0.5), trot) == 1.0  # the trot's stance
+    assert speed_scale(make_gait("walk", 0.3, duty_factor=0.6), trot) == pytest.approx(2 / 3)
     assert speed_scale(make_gait("trot", 0.4), trot) == pytest.approx(0.75)
     assert speed_scale(make_gait("trot", 0.2), trot) == 1.0  # never above the config's
     assert speed_scale(make_gait("pace", 0.3), trot) == 1.0
@@ -492,22 +494,22 @@ def test_the_controller_and_the_closed_loop_limit_commands_by_the_gait_walked():
     assert mpc.scheduler.gait.duty_factor == 0.5
     mpc.set_gait("walk")  # standing: taken at once
     assert mpc.scheduler.gait.duty_factor == 0.75  # solo12's config no longer forces 0.5
-    assert mpc.velocity_limits == pytest.approx([0.5 * x for x in lim])
+    assert mpc.velocity_limits == pytest.approx([x / 3 for x in lim])
     mpc._ramp_command(np.array([10.0, 0.0, -10.0]), 100.0)  # long enough to reach it
-    assert mpc.cmd.tolist() == pytest.approx([0.5 * lim[0], 0.0, -0.5 * lim[2]])
+    assert mpc.cmd.tolist() == pytest.approx([lim[0] / 3, 0.0, -lim[2] / 3])
     # walking, a change to the trot waits for the walk's swings: the walk's limits hold
     mpc.scheduler.command(0.0, True)
     mpc.set_gait("trot")
     assert mpc.scheduler.pending is not None
-    assert mpc.velocity_limits == pytest.approx([0.5 * x for x in lim])
+    assert mpc.velocity_limits == pytest.approx([x / 3 for x in lim])
     mpc.scheduler.command(1.0, True)  # the swings ended: the trot now
     assert mpc.scheduler.pending is None and mpc.velocity_limits == pytest.approx(lim)
     cfg = load_robot_config("solo12")
     assert command_limits(cfg)[0] == pytest.approx(lim)
-    assert command_limits(cfg, {"gait": "walk"})[0] == pytest.approx([0.5 * x for x in lim])
+    assert command_limits(cfg, {"gait": "walk"})[0] == pytest.approx([x / 3 for x in lim])
     assert command_limits(cfg, {"gait": "walk", "duty_factor": 0.5})[0] == pytest.approx(lim)
     assert command_limits(cfg, {"gait": "walk", "duty_factor": 0.0})[0] == pytest.approx(
-        [0.5 * x for x in lim])  # 0: the gait's own
+        [x / 3 for x in lim])  # 0: the gait's own
 
 
 def test_the_velocity_reference_closes_the_pose_error_over_the_horizon_while_walking(
@@ -539,3 +541,61 @@ def test_the_velocity_reference_closes_the_pose_error_over_the_horizon_while_wal
     mpc.pose_ref[0] += 10.0
     mpc._set_references(mpc.t_last)
     assert mpc.wp.v_ref.values[0, 0] <= mpc.velocity_limits[0] + 1e-12
+
+
+def _stance_widths(mpc, q: np.ndarray) -> np.ndarray:
+    """Lateral distance (base frame) between the left and right feet of the front and the
+    hind pair (go2 order FL FR RL RR)."""
+    import pinocchio as pin
+
+    m = mpc.model.pin_model
+    d = m.createData()
+    pin.framesForwardKinematics(m, d, q)
+    rot = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
+    y = [float(rot[:, 1] @ (d.oMf[m.getFrameId(f)].translation - q[:3])) for f in mpc.wp.feet]
+    return np.array([y[0] - y[1], y[2] - y[3]])
+
+
+@pytest.mark.parametrize("foot_lateral", [None, 0.0])
+def test_the_walk_keeps_its_feet_apart_by_the_foot_lateral_cost(walking_mpc, foot_lateral):
+    """The walk (three feet down, the CoM on an edge of their triangle) landed its swing feet
+    under the body rather than sway it, until the hind legs crossed and the robot tipped
+    over once stopped (go2, anymal_b, anymal_c in the closed loop). The foot_lateral cost
+    keeps each pair apart; without it (weight 0) the plans still cross the hind feet."""
+    import dataclasses
+
+    from horizon_mpc.posture import standing_configuration
+
+    mpc = walking_mpc
+    weights = mpc.settings.weights
+    if foot_lateral is not None:
+        mpc.wp.set_weights(dataclasses.replace(weights, foot_lateral=foot_lateral))
+    try:
+        _, q0 = standing_configuration(mpc.cfg)
+        nominal = _stance_widths(mpc, q0)
+        ticks = _perfect_model_ticks(mpc, [(0.0, 0.0, 0.0)] + [(-0.1, 0.0, 0.0)] * 200)
+        next(ticks)
+        mpc.set_gait("walk")  # standing: at once
+        widths = np.array([_stance_widths(mpc, plan.q[:, 0]) for plan in ticks])
+        assert float(mpc.wp.q.initial_guess[0, 0]) < -0.2  # it walked back
+        if foot_lateral is None:
+            assert (widths.min(0) > 0.3 * nominal).all(), widths.min(0) / nominal
+        else:
+            assert widths[:, 1].min() < 0.0  # crossed
+    finally:
+        mpc.wp.set_weights(weights)
+        mpc.set_gait("trot")
+
+
+def test_a_completed_stop_anchors_the_pose_reference_where_the_robot_stands(walking_mpc):
+    """Feet down for good, the pose reference is the measured pose: the lag a walk left in
+    it (up to pose_leash) is no place planted feet can take the base to."""
+    mpc = walking_mpc
+    was_walking, anchored = False, None
+    for plan in _perfect_model_ticks(mpc, [(0.3, 0.0, 0.3)] * 60 + [(0.0, 0.0, 0.0)] * 60):
+        if was_walking and not mpc.scheduler.walking:
+            anchored = (mpc.pose_ref.copy(), plan.q[:, 0].copy())
+        was_walking = mpc.scheduler.walking
+    assert anchored is not None, "the stop never completed"
+    pose_ref, q = anchored
+    np.testing.assert_allclose(pose_ref, [q[0], q[1], base_yaw(q)], atol=1e-9)

@@ -127,11 +127,15 @@ def make_gait(name: str, step_duration: float = 0.3, step_height: float = 0.08,
 
 def speed_scale(gait: Gait, reference: Gait) -> float:
     """The share of velocity limits set for ``reference`` (a robot config's gait) that
-    ``gait`` may be commanded: ``min(1, reference.period / gait.period)``. A foot covers
-    about the same stride per cycle in any gait, so a slower cycle walks slower: the walk
-    (duty 0.75, a cycle twice the trot's at one step duration) fell at the trot's limits
-    (anymal_c at 0.4-0.5 m/s, a1 at 0.4 m/s sideways; go2 reached 60-70 % of them). 1 for
-    a gait that stands (it walks no command) or a reference that stands."""
+    ``gait`` may be commanded: ``min(1, reference stance / gait stance)``, a stance being
+    ``duty_factor * period``, the time a foot stays down per cycle. A foot's stride is bounded
+    by its reach, about the same in any gait, and the body travels it while the foot is down,
+    so a longer stance walks slower: the walk (duty 0.75, a cycle twice the trot's at one
+    step duration: 0.9 s of stance against 0.3 s) gets a third of the trot's limits. At the
+    trot's limits it fell (anymal_c at 0.4-0.5 m/s forward, a1 at 0.4 m/s sideways; go2
+    reached 60-70 % of them). 1 for a gait that stands (it walks no command) or a reference
+    that stands."""
     if gait.stands or reference.stands:
         return 1.0
-    return min(1.0, reference.period / gait.period)
+    stance = gait.duty_factor * gait.period
+    return min(1.0, reference.duty_factor * reference.period / stance)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
+import casadi as cs
 import numpy as np
 
 from horizon_mpc.config import RobotConfig
@@ -72,6 +73,7 @@ class WalkingProblem:
         costs["base_position"].set_weight(w.base_position)
         costs["base_yaw"].set_weight(w.base_yaw)
         costs["posture"].set_weight(w.posture)
+        costs["foot_lateral"].set_weight(w.foot_lateral)
         costs["joint_velocity"].set_weight(w.joint_velocity)
         costs["acceleration"].set_weight(w.acceleration)
         costs["forces"].set_weight(w.force)
@@ -101,7 +103,7 @@ def build_walking_problem(model: RobotModel, cfg: RobotConfig,
 
     # feasibility: the base wrench of inverse dynamics vanishes (under-actuation)
     tau = model.inverse_dynamics(feet)(q, v, a, f)
-    prb.create_constraint("underactuation", tau[:6], nodes=range(st.n_nodes))
+    prb.create_constraint("underactuation", tau[:6], nodes=range(prb.n_nodes))
     if st.torque_limits:
         add_torque_limits(prb, model, tau[6:])
     contacts = add_contacts(prb, model, feet, q, v, f, mu,
@@ -126,6 +128,12 @@ def build_walking_problem(model: RobotModel, cfg: RobotConfig,
     prb.create_cost("base_position", q[0:2] - pose_ref[0:2])
     prb.create_cost("base_yaw", R[1, 0] * pose_ref[2] - R[0, 0] * pose_ref[3])  # sin(yaw-yaw_ref)
     prb.create_cost("posture", q[7:] - q_nom[7:])
+    # each foot's lateral offset from the base (base frame) near its standing one: the
+    # support polygon keeps its width (without it the walk's three-foot stances put the
+    # swing feet under the body, step after step, until the hind legs crossed)
+    lateral = cs.vertcat(*[cs.dot(R[:, 1], model.fk(foot)(q)[0] - q[0:3]) for foot in feet])
+    lateral_nom = cs.Function("lateral", [q], [lateral])(q_nom)
+    prb.create_cost("foot_lateral", lateral - lateral_nom)
     prb.create_cost("joint_velocity", v[6:])
     prb.create_cost("acceleration", a)
     prb.create_cost("forces", f)
@@ -136,6 +144,6 @@ def build_walking_problem(model: RobotModel, cfg: RobotConfig,
     pose_ref.assign([0.0, 0.0, 1.0, 0.0])
     height_ref.assign(h_nom)
     wp.standing_guess(q_nom)
-    contacts.set_schedule(np.ones((len(feet), st.n_nodes + 1), bool),
-                          np.zeros((len(feet), st.n_nodes + 1)))
+    contacts.set_schedule(np.ones((len(feet), prb.n_nodes + 1), bool),
+                          np.zeros((len(feet), prb.n_nodes + 1)))
     return wp
