@@ -163,7 +163,7 @@ class MpcParameters:
         for name, vmax, unit in zip(LIVE_LIMITS, st.max_velocity, ("m/s", "m/s", "rad/s"),
                                     strict=True):
             d(name, float(vmax), f"|{name[4:]}| command limit ({unit}) of the config's gait "
-              "(a gait with a slower cycle, e.g. walk, gets a share of it); live",
+              "(a gait with a longer stance, e.g. walk, gets a share of it); live",
               float_range(0, 5))
         d("max_command_norm", float(st.max_command_norm), "combined command limit: the "
           "command's norm with each axis divided by its limit (max_vx, max_vy, max_wz) is at "
