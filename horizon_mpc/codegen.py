@@ -23,8 +23,8 @@ are removed by later builds.
 The cache is bounded: loading a library marks it used (its modification time), and after
 each build the least recently used libraries are deleted while the cache holds more than
 ``$HORIZON_MPC_CACHE_MAX_MB`` (default 2048; 0 disables the bound), sparing those this
-process loaded and any used in the last ten minutes. ``python -m horizon_mpc.codegen info``
-reports the cache, ``prune [--max-mb N]`` bounds it now, ``clear`` empties it.
+process loaded and any used in the last ten minutes. ``python -m horizon_mpc.codegen_cli
+info`` reports the cache, ``prune [--max-mb N]`` bounds it now, ``clear`` empties it.
 
 Set ``HORIZON_MPC_NO_CODEGEN=1`` to get ``fn`` back unchanged (debugging, or no compiler).
 """
@@ -60,6 +60,8 @@ __all__ = [
     "CC_ARGV",
     "CacheInfo",
     "CompileStats",
+    "DEFAULT_CACHE_MAX_MB",
+    "PRUNE_SPARE_S",
     "arch_flags",
     "build_shared_library",
     "cache_info",
@@ -381,7 +383,7 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
 STALE_BUILD_S = 3600.0  # a build folder this old was left by a killed process
 #: libraries used this recently are never pruned (another process may be loading them)
 PRUNE_SPARE_S = 600.0
-_DEFAULT_CACHE_MAX_MB = 2048.0
+DEFAULT_CACHE_MAX_MB = 2048.0
 
 
 def mark_used(lib: Path) -> None:
@@ -398,7 +400,7 @@ def cache_max_bytes() -> int | None:
     """
     text = os.environ.get("HORIZON_MPC_CACHE_MAX_MB", "").strip()
     try:
-        mb = float(text) if text else _DEFAULT_CACHE_MAX_MB
+        mb = float(text) if text else DEFAULT_CACHE_MAX_MB
     except ValueError:
         mb = math.nan
     if not mb >= 0.0 or math.isinf(mb):
@@ -409,14 +411,16 @@ def cache_max_bytes() -> int | None:
 
 @dataclass
 class CacheInfo:
-    """What a cache folder holds: ``libraries`` (count), ``bytes``, and the modification
-    times (s since the epoch) of the least and most recently used library."""
+    """What a cache folder holds: ``libraries`` (count), ``bytes``, the modification
+    times (s since the epoch) of the least and most recently used library, and ``recent``,
+    the libraries used in the last :data:`PRUNE_SPARE_S` seconds (never pruned)."""
 
     folder: Path
     libraries: int
     bytes: int
     oldest: float | None
     newest: float | None
+    recent: int
 
 
 def _libraries(folder: Path) -> list[tuple[float, int, Path]]:
@@ -433,8 +437,10 @@ def cache_info(folder: str | Path | None = None) -> CacheInfo:
     """The libraries of the cache ``folder`` (default :func:`default_cache_dir`)."""
     folder = Path(folder).expanduser() if folder is not None else default_cache_dir()
     libs = _libraries(folder) if folder.is_dir() else []
+    now = time.time()
     return CacheInfo(folder, len(libs), sum(size for _, size, _ in libs),
-                     libs[0][0] if libs else None, libs[-1][0] if libs else None)
+                     libs[0][0] if libs else None, libs[-1][0] if libs else None,
+                     sum(now - mtime < PRUNE_SPARE_S for mtime, _, _ in libs))
 
 
 def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
@@ -576,50 +582,3 @@ class BufferedFunction:
             raise RuntimeError(f"evaluating {self.fn.name()} failed")
         return self.outputs
 
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m horizon_mpc.codegen {info,prune,clear} [--dir D] [--max-mb N]``: the
-    compiled-code cache's size, bounding it now, emptying it."""
-    import argparse
-
-    parser = argparse.ArgumentParser(prog="python -m horizon_mpc.codegen",
-                                     description=main.__doc__.split(":", 1)[1].strip())
-    parser.add_argument("command", choices=("info", "prune", "clear"))
-    parser.add_argument("--dir", default=None, help="cache folder (default: "
-                        f"{default_cache_dir()})")
-    parser.add_argument("--max-mb", type=float, default=None,
-                        help="prune: the bound in MB, > 0 (default $HORIZON_MPC_CACHE_MAX_MB "
-                        f"or {_DEFAULT_CACHE_MAX_MB:g}); `clear` empties the cache")
-    args = parser.parse_args(argv)
-    if args.max_mb is not None and not (0 < args.max_mb < math.inf):
-        parser.error(f"--max-mb must be a number of MB > 0, got {args.max_mb:g} (`clear` "
-                     "empties the cache; HORIZON_MPC_CACHE_MAX_MB=0 leaves it unbounded)")
-    bound = None
-    try:
-        if args.command == "clear":
-            removed = prune_cache(args.dir, max_bytes=0, spare_s=0.0)
-        elif args.command == "prune":
-            bound = cache_max_bytes() if args.max_mb is None else int(args.max_mb * 1e6)
-            removed = prune_cache(args.dir, max_bytes=bound)
-    except ValueError as exc:
-        parser.error(str(exc))
-    if args.command != "info":
-        print(f"removed {len(removed)} libraries")
-    info = cache_info(args.dir)
-    when = (time.strftime("%Y-%m-%d %H:%M", time.localtime(info.oldest))
-            if info.oldest is not None else "-")
-    print(f"{info.folder}: {info.libraries} libraries, {info.bytes / 1e6:.1f} MB "
-          f"(least recently used {when})")
-    if args.command == "prune" and bound is None:
-        print("no bound (HORIZON_MPC_CACHE_MAX_MB=0): nothing to prune")
-    elif args.command == "prune" and info.bytes > bound:
-        recent = sum(time.time() - mtime < PRUNE_SPARE_S
-                     for mtime, _, _ in _libraries(info.folder))
-        print(f"still above the bound of {bound / 1e6:g} MB: {recent} libraries used in the "
-              f"last {PRUNE_SPARE_S / 60:g} minutes are spared (another process may be "
-              "loading them)")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -371,7 +371,7 @@ def test_a_malformed_bound_is_an_error_that_names_the_variable_but_builds_go_on(
 
 def test_cache_command_line_reports_prunes_and_clears(cache):
     _fake_libraries(cache, {"a": 9000, "b": 8000}, size=2_000_000)
-    cmd = [sys.executable, "-m", "horizon_mpc.codegen"]
+    cmd = [sys.executable, "-m", "horizon_mpc.codegen_cli"]
     env = {**os.environ, "HORIZON_MPC_CACHE_DIR": str(cache)}
     info = subprocess.run([*cmd, "info"], env=env, capture_output=True, text=True, timeout=120)
     assert info.returncode == 0 and "2 libraries, 4.0 MB" in info.stdout, info.stdout
@@ -390,7 +390,7 @@ def test_cache_command_line_reports_prunes_and_clears(cache):
 
 def test_cache_command_line_says_what_it_spared_or_that_there_is_no_bound(cache):
     _fake_libraries(cache, {"a": 9000, "b": 60}, size=2_000_000)
-    cmd = [sys.executable, "-m", "horizon_mpc.codegen", "prune"]
+    cmd = [sys.executable, "-m", "horizon_mpc.codegen_cli", "prune"]
     env = {**os.environ, "HORIZON_MPC_CACHE_DIR": str(cache)}
     out = subprocess.run([*cmd, "--max-mb", "1"], env=env, capture_output=True, text=True,
                          timeout=120).stdout
