@@ -234,7 +234,7 @@ class WalkingMpc:
         self._advance_pose_ref(q, dt_tick)
         self.t_last = t
         self._pose_expected = _pose(q)
-        self._command_gait(t, cmd, q)
+        self._command_gait(t, cmd)
         self._set_state(q, v)
         self._set_references(t)
         ok = self._solve(self.iterations)
@@ -277,7 +277,7 @@ class WalkingMpc:
         self._advance_pose_ref(q_pred, dt_tick)
         self.t_last = t_next
         self._pose_expected = _pose(q_pred)
-        self._command_gait(t_next, cmd, q_pred)
+        self._command_gait(t_next, cmd)
         self._set_state(q_pred, v_pred)
         self._set_references(t_next)
         n_whole = self.iterations - 1
@@ -359,7 +359,7 @@ class WalkingMpc:
         # moves the warm start by the rest too, so its nodes sit at t + k dt
         self._shift_fraction(dt_tick / self.wp.settings.dt - n_shift)
 
-    def _command_gait(self, t: float, cmd: np.ndarray | None, q: np.ndarray) -> None:
+    def _command_gait(self, t: float, cmd: np.ndarray | None) -> None:
         walking = self.scheduler.walking
         self.scheduler.command(t, bool(np.any(np.abs(self.cmd) > 1e-3)) or bool(
             cmd is not None and np.any(np.abs(cmd) > 1e-3)))
@@ -367,8 +367,9 @@ class WalkingMpc:
             # the stop is over (every foot down for good): stand where the robot is. The
             # pose reference may still hold the lag of the walk (up to pose_leash; go2
             # walking backwards at -0.3 m/s: 0.35 m), a pose planted feet cannot reach:
-            # the costs would only lean the base toward it
-            self.pose_ref = np.array(_pose(q))
+            # the costs would only lean the base toward it (_pose_expected: node 0's,
+            # set before this call)
+            self.pose_ref = np.array(self._pose_expected)
 
     def _solve(self, iterations: int, update_multipliers: bool = True) -> bool:
         self.solver.set_option("time_budget", self.time_budget)
