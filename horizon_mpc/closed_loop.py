@@ -174,10 +174,10 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
     if sim_parameters and mode != "lockstep":
         raise ValueError(f"{sorted(sim_parameters)}: lockstep mode only")
     loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
+    domain_id = run_domain_id(mode, domain_id)
     try:
         if mode == "lockstep":
-            rec = _run_lockstep(robot, iterations, loop, mpc_parameters,
-                                private_domain_id() if domain_id is None else domain_id,
+            rec = _run_lockstep(robot, iterations, loop, mpc_parameters, domain_id,
                                 sim_parameters)
         else:
             rec = _run_realtime(robot, iterations, loop, domain_id, mpc_parameters,
@@ -589,9 +589,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         log.error("cannot run: %s", message)
         return 2
-    domain_id = args.domain_id
-    if domain_id is None:  # run()'s defaults, resolved here to be told
-        domain_id = private_domain_id() if args.mode == "lockstep" else default_domain_id()
+    domain_id = run_domain_id(args.mode, args.domain_id)  # resolved here to be told
     log.info("closed loop: %s, %s, profile %s, ROS_DOMAIN_ID %d%s", args.robot, args.mode,
              profile, domain_id, " (this run's own; --domain-id to choose)"
              if args.domain_id is None and args.mode == "lockstep" else "")
@@ -629,6 +627,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                   "messages", "; ".join(summary["foreign_publishers"]))
         return 1
     return 0
+
+
+def run_domain_id(mode: str, domain_id: int | None = None) -> int:
+    """The ``ROS_DOMAIN_ID`` of a run (:func:`run`'s ``domain_id``): the one given, else in
+    lockstep a private one from this process id, in real time the environment's or that
+    private one."""
+    if domain_id is not None:
+        return int(domain_id)
+    return private_domain_id() if mode == "lockstep" else default_domain_id()
 
 
 # set by this launcher (the simulator is built for --robot, lockstep needs trigger 'state')
