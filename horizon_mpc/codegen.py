@@ -127,6 +127,11 @@ def default_cache_dir() -> Path:
     return base / "horizon_mpc"
 
 
+def _cache_folder(folder: str | Path | None) -> Path:
+    """``folder`` (user-expanded), or :func:`default_cache_dir` when None."""
+    return Path(folder).expanduser() if folder is not None else default_cache_dir()
+
+
 def function_name(text: str) -> str:
     """``text`` made a valid CasADi Function (and C) name: ``[A-Za-z](_?[A-Za-z0-9])*``, ASCII,
     at most 64 characters (a longer one keeps a hash of the rest), and never a C keyword, a
@@ -238,7 +243,7 @@ def compile_function(
     if not codegen_enabled():
         return fn
     fn = _renamed(fn, function_name(name or fn.name()))  # the name is a C symbol
-    folder = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
+    folder = _cache_folder(cache_dir)
     lib = folder / f"{fn.name()}_{_key(fn)}.so"
     if str(lib) in _LOADED:
         STATS.memory_hits += 1
@@ -435,7 +440,7 @@ def _libraries(folder: Path) -> list[tuple[float, int, Path]]:
 
 def cache_info(folder: str | Path | None = None) -> CacheInfo:
     """The libraries of the cache ``folder`` (default :func:`default_cache_dir`)."""
-    folder = Path(folder).expanduser() if folder is not None else default_cache_dir()
+    folder = _cache_folder(folder)
     libs = _libraries(folder) if folder.is_dir() else []
     now = time.time()
     return CacheInfo(folder, len(libs), sum(size for _, size, _ in libs),
@@ -455,7 +460,7 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
     Raises:
         ValueError: a malformed ``$HORIZON_MPC_CACHE_MAX_MB`` (with ``max_bytes`` -1).
     """
-    folder = Path(folder).expanduser() if folder is not None else default_cache_dir()
+    folder = _cache_folder(folder)
     if max_bytes == -1:
         max_bytes = cache_max_bytes()
     if max_bytes is None or not folder.is_dir():
