@@ -260,6 +260,28 @@ def test_prepared_ticks_are_feedback_steps_that_trot_a_perfect_model(walking_mpc
     mpc.settings.max_extrapolation = 0.0  # the fixture is shared
 
 
+def test_a_state_at_the_prepared_time_up_to_round_off_gets_the_feedback_step(walking_mpc):
+    """prepare(t + dt) in floating point is 1e-17 s off a state stamped (k + 1) dt: the
+    same tick time (SAME_TIME), not a miss; a microsecond off is one (max_extrapolation 0)."""
+    from horizon_mpc.mpc.controller import SAME_TIME
+    from horizon_mpc.posture import standing_configuration
+
+    mpc = walking_mpc
+    assert mpc.settings.max_extrapolation == 0.0
+    _, q0 = standing_configuration(mpc.cfg)
+    mpc.t_last = None
+    plan = mpc.start(q0, np.zeros(mpc.model.nv), 0.1)
+    misses = mpc.prepare_misses
+    t_next = 0.1 + mpc.settings.dt  # 0.12000000000000001
+    assert t_next != 0.12 and abs(t_next - 0.12) < SAME_TIME
+    assert mpc.prepare(t_next, None)
+    plan = mpc.update(0.12, plan.q[:, 1], plan.v[:, 1], None)
+    assert mpc.solver.stats.status == "feedback" and mpc.prepare_misses == misses
+    assert mpc.prepare(0.14, None)
+    plan = mpc.update(0.14 + 1e-6, plan.q[:, 1], plan.v[:, 1], None)
+    assert mpc.solver.stats.status == "rti" and mpc.prepare_misses == misses + 1
+
+
 def test_the_dynamics_pattern_covers_every_nonzero_of_the_walking_jacobians(walking_mpc):
     """The compiled backward pass reads A and B only on the stage model's structural pattern:
     every entry the quadratisation produces outside it must be exactly zero (go2: 5 %)."""
