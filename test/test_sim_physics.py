@@ -332,3 +332,19 @@ def test_set_state_and_step_refuse_what_they_cannot_do(go2):
         with pytest.raises(ValueError, match="integer >= 0"):
             go2.step(n)
     np.testing.assert_allclose(go2.state().q, go2.q_start, atol=1e-7)  # nothing changed
+
+
+def test_the_simulator_imports_pybullet_without_its_banner_and_keeps_stderr():
+    """pybullet writes its build time on stderr at import (every sim_node start showed it):
+    the simulator's modules import it quietly, and stderr works as before afterwards."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import horizon_mpc.sim.simulator as s; "
+            "print('after', s.p.getAPIVersion() > 0, file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, check=True)
+    assert out.stderr == "after True\n"
+    plain = subprocess.run([sys.executable, "-c", "import pybullet"], capture_output=True,
+                           text=True, timeout=120, check=True)
+    assert "pybullet build time" in plain.stderr  # what the quiet import hides

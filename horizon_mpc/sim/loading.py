@@ -27,7 +27,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pybullet as p
+
+from horizon_mpc.sim.pybullet_import import import_pybullet
+
+p = import_pybullet()  # the module, without its banner (pybullet_import.py)
 
 __all__ = ["MASSLESS_LINK_MASS", "LoadedRobot", "load_robot", "resolve_mesh_uris"]
 

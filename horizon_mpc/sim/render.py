@@ -8,9 +8,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import pybullet as p
 
+from horizon_mpc.sim.pybullet_import import import_pybullet
 from horizon_mpc.sim.rotations import quat_yaw
+
+p = import_pybullet()  # the module, without its banner (pybullet_import.py)
 
 __all__ = ["checker_texture", "render_following", "write_gif"]
 

@@ -22,11 +22,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pybullet as p
 
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.posture import standing_configuration
 from horizon_mpc.sim.loading import LoadedRobot, load_robot
+from horizon_mpc.sim.pybullet_import import import_pybullet
 from horizon_mpc.sim.render import checker_texture, render_following
 from horizon_mpc.sim.rotations import (
     quat_from_yaw,
@@ -37,6 +37,8 @@ from horizon_mpc.sim.rotations import (
 )
 from horizon_mpc.sim.standing import standing_feedforward
 from horizon_mpc.sim.trajectory import JointTrajectoryCommand, ReferenceGenerator
+
+p = import_pybullet()  # the module, without its banner (pybullet_import.py)
 
 __all__ = ["SimState", "Simulator"]
 
