@@ -620,3 +620,32 @@ def test_a_receding_horizon_around_an_obstacle_converges_on_every_tick():
         p.set_bounds(x1, x1, nodes=0)
         assert solver.solve(), (tick, solver.stats.status)
         assert solver.stats.iterations <= 200
+
+
+def _double_integrator_with_a_nan_derivative_at_rest() -> Problem:
+    """A feasible guess (at rest) where the speed residual |v| has no derivative."""
+    prb = Problem(20)
+    p = prb.create_state_variable("p", 2)
+    v = prb.create_state_variable("v", 2)
+    a = prb.create_input_variable("a", 2)
+    prb.set_dynamics(cs.vertcat(v, a))
+    prb.set_dt(0.1)
+    p.set_bounds([0, 0], [0, 0], nodes=0)
+    v.set_bounds([0, 0], [0, 0], nodes=0)
+    prb.create_cost("effort", a, weight=0.1)
+    prb.create_cost("speed", cs.norm_2(v), weight=0.1)
+    prb.create_final_cost("goal", p - [1.0, 0.5], weight=10.0)
+    return prb
+
+
+@pytest.mark.parametrize("opts", [{}, {"codegen": False}, {"equality": "lagrangian"},
+                                  {"input_bounds": "box"}, {"line_search": False}])
+def test_a_point_where_no_step_can_be_computed_is_never_called_converged(opts):
+    """The guess is feasible and the linearisation NaN there: no step, so nothing is known
+    about stationarity (it was 'converged' at iteration 1, unmoved, 12.5 above nothing)."""
+    solver = make_solver("ilqr", _double_integrator_with_a_nan_derivative_at_rest(), opts)
+    assert solver.solve() is False
+    assert solver.stats.status == "linearisation not finite (NaN/Inf) at every regularisation"
+    rti = make_solver("ilqr", _double_integrator_with_a_nan_derivative_at_rest(),
+                      {**opts, "rti": True})
+    assert rti.solve() is False and rti.stats.success is False

@@ -480,3 +480,44 @@ def test_verbose_prints_the_iterations_and_quiet_prints_nothing(prb, name, capfd
     # a line per iteration (IPOPT: its table); this QP converges in one step
     assert len(out.strip().splitlines()) >= 2, out
     assert "cost" in out or "objective" in out, out
+
+
+def test_a_slice_past_the_nodes_is_refused_not_an_empty_selection(prb):
+    """slice(20, 30) of 11 nodes set nothing without a word; Python's negative bounds
+    still count from the end."""
+    x = prb.get_variable("x")
+    with pytest.raises(IndexError, match=r"slice\(20, 30, None\) out of range .* 0\.\.10"):
+        x.set_bounds([0, 0], [1, 1], nodes=slice(20, 30))
+    with pytest.raises(IndexError, match="out of range"):
+        prb.create_constraint("c", x[0], nodes=slice(0, 12))
+    x.set_bounds([0, 0], [1, 1], nodes=slice(-2, None))
+    assert np.isfinite(x.lower_bounds).all(axis=0).tolist() == [False] * 9 + [True] * 2
+    x.set_bounds([0, 0], [2, 2], nodes=slice(0, 11))  # up to the end is in range
+    assert np.all(x.upper_bounds == 2)
+
+
+@pytest.mark.parametrize("solver", ["ipopt", "gnsqp", "ilqr"])
+def test_a_dt_parameter_that_is_not_positive_is_refused_at_the_solve(prb, solver):
+    """set_dt checks a number; a parameter assigned -0.1 solved a time-reversed problem and
+    each solver called it a success."""
+    dt = prb.create_parameter("dt", 1)
+    prb.set_dt(dt)
+    x = prb.get_variable("x")
+    x.set_bounds([0, 0], [0, 0], nodes=0)
+    prb.create_final_constraint("goal", x - np.array([1.0, 0.0]))
+    prb.create_cost("effort", prb.get_variable("u"), weight=0.1)
+    dt.assign(0.1)
+    s = make_solver(solver, prb)
+    assert s.solve()
+    for bad in (-0.1, 0.0, np.inf):
+        dt.assign(bad)
+        with pytest.raises(ValueError, match=r"dt must be a finite number > 0; .* at node 0"):
+            s.solve()
+    values = np.full((1, 11), 0.1)
+    values[0, 7] = -0.1
+    dt.assign(values)
+    with pytest.raises(ValueError, match="at node 7"):
+        s.solve()
+    if solver == "ilqr":
+        with pytest.raises(ValueError, match="at node 7"):
+            s.prepare()

@@ -2,11 +2,13 @@
 
 Nodes are numbered 0..N (``N = n_nodes``, the number of intervals). States live on nodes
 0..N, inputs on 0..N-1. Every ``nodes=`` argument of the Problem API accepts an int, a list
-or integer array, a ``range``, a ``slice``, a boolean mask (array or list) with one entry
-per node the object lives on, or None (= every node the object lives on). A bool alone or a
-non-integer number is refused. Per-node values (a ``(dim, n_sel)`` array) go to the nodes in
-the order they are listed (``nodes=[8, 3]``: column 0 to node 8); a list naming a node
-twice is the sorted set of its nodes (a scalar or ``(dim,)`` value then fills them).
+or integer array, a ``range``, a ``slice`` (of the nodes the object lives on, negative
+bounds counting from the end as in Python; a bound beyond them is refused), a boolean
+mask (array or list) with one entry per node the object lives on, or None (= every node
+the object lives on). A bool alone or a non-integer number is refused. Per-node values
+(a ``(dim, n_sel)`` array) go to the nodes in the order they are listed (``nodes=[8, 3]``:
+column 0 to node 8); a list naming a node twice is the sorted set of its nodes (a scalar
+or ``(dim,)`` value then fills them).
 """
 
 from __future__ import annotations
@@ -34,6 +36,13 @@ def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "",
     if nodes is None:
         return np.arange(n_valid)
     if isinstance(nodes, slice):
+        # a Python slice of the nodes (negative bounds count from the end), but a bound
+        # past them is a mistake, not an empty or clipped selection (slice(20, 30) of 11
+        # nodes set nothing without a word)
+        for end in (nodes.start, nodes.stop):
+            if end is not None and not -n_valid <= _node_index(end, what) <= n_valid:
+                raise IndexError(f"nodes {nodes} out of range for {what}: valid nodes are "
+                                 f"0..{n_valid - 1}")
         return np.arange(n_valid)[nodes]
     if isinstance(nodes, (bool, np.bool_)):
         raise TypeError(f"nodes of {what}: a bool is not a node (give a mask with one entry "

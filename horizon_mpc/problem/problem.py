@@ -331,6 +331,23 @@ class Problem:
         return cs.Function("dt", [self.s, self.p], [cs.SX(dt) if isinstance(dt, float) else dt],
                            ["s", "p"], ["dt"])
 
+    def check_dt_values(self) -> None:
+        """ValueError when dt, an expression of parameters, is not a finite number > 0 on
+        some node with the parameters' current values (``set_dt`` checks a constant; what
+        single variables make of it is for their bounds to keep positive). Solvers call it
+        at every solve: a parameter assigned -0.1 solved a time-reversed problem and called
+        it a success."""
+        dt = self._dt
+        if dt is None or isinstance(dt, float) or cs.depends_on(dt, self.s):
+            return
+        values = np.asarray(self.dt_function()(np.zeros(self.ns), self.parameter_values()))
+        bad = np.flatnonzero(~(np.isfinite(values) & (values > 0)).ravel())
+        if bad.size:
+            k = int(bad[0])
+            raise ValueError(f"dt must be a finite number > 0; with the parameters' values it "
+                             f"is {float(values.ravel()[k])!r} at node {k}"
+                             + (f" (and {bad.size - 1} other node(s))" if bad.size > 1 else ""))
+
     def _require_dynamics(self) -> None:
         if self._xdot is None:
             raise RuntimeError("the dynamics are not set: call set_dynamics()")

@@ -204,8 +204,11 @@ class Solver:
         Raises:
             RuntimeError: the problem's structure changed since the solver was built
                 (see :meth:`check_problem_unchanged`).
+            ValueError: dt, an expression of parameters, is not > 0 with their values
+                (:meth:`.Problem.check_dt_values`).
         """
         self.check_problem_unchanged()
+        self.prb.check_dt_values()
         ok = self._solve()
         if self.solution and self.opts["warm_start"]:
             self._write_back()

@@ -230,8 +230,8 @@ class GnSqpSolver(NlpSolver):
                 self._progress(f"{it:3d} cost {f:.6e} viol {viol:.2e} stationarity "
                                f"{stat:.2e} alpha {alpha or 0.0:.3f}")
             if not (math.isfinite(f) and math.isfinite(viol) and np.isfinite(grad).all()):
-                status = ("not finite at the initial guess (NaN/inf in the guess or the "
-                          "parameters)" if it == 0 else "not finite after a step")
+                status = (_not_finite_at_guess(w, p, f, viol) if it == 0
+                          else "not finite after a step")
                 break
             if viol <= o["tol_constr"] and ((stat <= o["tol"] and comp <= o["tol"])
                                             or step <= o["tol_step"]):
@@ -302,6 +302,15 @@ class GnSqpSolver(NlpSolver):
             alpha *= 0.5
         return None
 
+
+
+def _not_finite_at_guess(w: np.ndarray, p: np.ndarray, f: float, viol: float) -> str:
+    """Why the first linearisation is not finite, as far as the data say."""
+    if not (np.isfinite(w).all() and np.isfinite(p).all()):
+        return "not finite at the initial guess (NaN/inf in the guess or the parameters)"
+    if not (math.isfinite(f) and math.isfinite(viol)):
+        return "cost or constraints not finite at the initial guess"
+    return "cost gradient not finite at the initial guess (a derivative undefined there)"
 
 
 def _signed(lam: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:

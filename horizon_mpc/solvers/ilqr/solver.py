@@ -752,15 +752,20 @@ class IlqrSolver(Solver):
         it = 0
         t_iter = time.perf_counter()  # start of the current iteration
         inner = 0  # iterations since the last multiplier update
+        stepped = False  # whether the last iteration computed a step
         for it in range(1, n_iter + 1):
             ev, info = self._iterate(ev)
             # a step of the regularised model understates the gradient by ~mu where mu
             # dominates the Hessian: both measures are scaled back (a pendulum whose steps
             # were rejected until mu reached 1e6 was called converged 3 % above the optimum)
             damping = max(1.0, self.mu)
-            stationary = (abs(info.get("expected", 0.0)) * damping
-                          <= o["tol"] * (1.0 + ev["cost"])
-                          or info.get("step_norm", 1.0) * damping < 1e-10)
+            # no step computed (the linearisation not finite, no positive-definite Q_uu): the
+            # point is not known to be stationary (a NaN derivative at a feasible guess was
+            # called converged there, unmoved)
+            stepped = "expected" in info
+            stationary = stepped and (abs(info["expected"]) * damping
+                                      <= o["tol"] * (1.0 + ev["cost"])
+                                      or info.get("step_norm", 1.0) * damping < 1e-10)
             # multipliers and penalties: a converging solve updates them when the inner
             # (fixed-multiplier) problem is nearly stationary or every `al_max_inner`
             # iterations (updating after every iteration made the penalty ratchet to rho_max
@@ -772,8 +777,9 @@ class IlqrSolver(Solver):
             # "not decreasing fast enough" says nothing and the penalty would ratchet up
             # without bound through the shifts, ruining the conditioning of the steps
             inner += 1
-            inner_done = (abs(info.get("expected", 0.0)) <= o["al_inner_tol"] * (1.0 + ev["cost"])
-                          or not info.get("accepted") or inner >= o["al_max_inner"])
+            inner_done = inner >= o["al_max_inner"] or stepped and (
+                abs(info["expected"]) <= o["al_inner_tol"] * (1.0 + ev["cost"])
+                or not info.get("accepted"))
             if (rti and it == n_iter) or (not rti and inner_done):
                 inner = 0
                 if not rti or o["rti_multiplier_update"]:
@@ -823,8 +829,9 @@ class IlqrSolver(Solver):
                 break
             t_iter = now
         if rti:
-            status = "rti" if status != "time budget" else status
-            converged = self._rti_success(ev)
+            # the iterations ran (a failure to compute a step says so, and is no success)
+            status = "rti" if status == "max_iter" else status
+            converged = stepped and self._rti_success(ev)
         elif not converged:
             # the next solve starts from the initial penalties (multipliers kept): those a
             # failed solve ratcheted to rho_max, carried on by shift(), left every later
@@ -862,6 +869,7 @@ class IlqrSolver(Solver):
         ``stats.status`` says why.
         """
         self.check_problem_unchanged()
+        self.prb.check_dt_values()
         t_start = time.perf_counter()
         ev = self._begin_call()
         if ev is None:
