@@ -649,3 +649,33 @@ def test_a_point_where_no_step_can_be_computed_is_never_called_converged(opts):
     rti = make_solver("ilqr", _double_integrator_with_a_nan_derivative_at_rest(),
                       {**opts, "rti": True})
     assert rti.solve() is False and rti.stats.success is False
+
+
+def test_a_resolve_after_an_infeasible_solve_starts_without_its_diverged_multipliers():
+    """A state box that makes the final upright state unreachable: the solve fails, its
+    final equality's multiplier blows up (1.7e11); with the box relaxed the same solver must
+    reach the optimum as a fresh one does (it stopped at max_iter, cost 147.5, before)."""
+    def swing_up():
+        prb = Problem(60)
+        th = prb.create_state_variable("th", 1)
+        om = prb.create_state_variable("om", 1)
+        u = prb.create_input_variable("u", 1)
+        prb.set_dynamics(cs.vertcat(om, -9.81 * cs.sin(th) + u))
+        prb.set_dt(0.05)
+        th.set_bounds(0, 0, nodes=0)
+        om.set_bounds(0, 0, nodes=0)
+        u.set_bounds(-5, 5)
+        prb.create_cost("effort", u, weight=0.1)
+        prb.create_final_constraint("up", cs.vertcat(th - np.pi, om))
+        return prb, th
+
+    prb, th = swing_up()
+    solver = make_solver("ilqr", prb)
+    th.set_bounds(-0.5, 0.5, nodes=range(1, 60))
+    assert not solver.solve()
+    assert np.abs(solver._alN.lam).max() == 0.0  # forgotten: they were past rho_max
+    th.set_bounds(-np.inf, np.inf, nodes=range(1, 60))
+    assert solver.solve(), solver.stats.status
+    fresh = make_solver("ilqr", swing_up()[0])
+    assert fresh.solve()
+    assert solver.stats.cost == pytest.approx(fresh.stats.cost, rel=1e-6)

@@ -838,6 +838,15 @@ class IlqrSolver(Solver):
             # solve of a receding horizon ill-conditioned (it failed from then on)
             self._al.reset_penalties()
             self._alN.reset_penalties()
+            # multipliers past the largest penalty (an infeasible problem's, e.g. 1.7e11 on a
+            # final equality that a state box made unreachable) are no estimate: kept, they
+            # held the next solve at max_iter after the box was relaxed (a fresh solver: 80
+            # iterations to the optimum)
+            dropped = (self._al.forget_diverged(o["rho_max"])
+                       + self._alN.forget_diverged(o["rho_max"]))
+            if dropped:
+                log.info("ilqr: %d constraint row(s) ended with multipliers above rho_max "
+                         "(%g): the next solve starts them at zero", dropped, o["rho_max"])
         self.stats.iterations = it
         self.stats.status = status
         self.stats.success = bool(converged)
