@@ -21,6 +21,30 @@ def pendulum_swing_up(u_max: float, n_nodes: int = 60) -> Problem:
     return prb
 
 
+def planar_double_integrator_at_rest(n_nodes: int, dt: float = 0.1):
+    """A point in the plane (position ``p``, velocity ``v``, acceleration input ``a``, 2 each)
+    starting at rest at the origin; returns ``(prb, p, v, a)`` for the caller's terms."""
+    prb = Problem(n_nodes)
+    p = prb.create_state_variable("p", 2)
+    v = prb.create_state_variable("v", 2)
+    a = prb.create_input_variable("a", 2)
+    prb.set_dynamics(cs.vertcat(v, a))
+    prb.set_dt(dt)
+    p.set_bounds([0, 0], [0, 0], nodes=0)
+    v.set_bounds([0, 0], [0, 0], nodes=0)
+    return prb, p, v, a
+
+
+def double_integrator_with_a_nan_derivative_at_rest() -> Problem:
+    """The planar double integrator with a speed residual ``|v|``, which has no derivative
+    at ``v = 0``: the all-zero guess is feasible and its linearisation NaN."""
+    prb, p, v, a = planar_double_integrator_at_rest(20)
+    prb.create_cost("effort", a, weight=0.1)
+    prb.create_cost("speed", cs.norm_2(v), weight=0.1)
+    prb.create_final_cost("goal", p - [1.0, 0.5], weight=10.0)
+    return prb
+
+
 def trotting_go2_mpc(ticks: int):
     """A go2 ``WalkingMpc`` started standing and ticked ``ticks`` times (0.02 s apart, the
     state held) under a forward, sideways and turning command: trotting, so its problem has

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import casadi as cs
 import numpy as np
 import pytest
+from ocps import double_integrator_with_a_nan_derivative_at_rest
 
 from horizon_mpc.examples import (
     build_cartpole,
@@ -12,7 +12,6 @@ from horizon_mpc.examples import (
     build_pendulum_min_time,
     double_integrator_optimum,
 )
-from horizon_mpc.problem import Problem
 from horizon_mpc.solvers import make_solver
 
 
@@ -265,18 +264,7 @@ def test_a_feasible_problem_that_starts_infeasible_still_converges():
 def test_a_derivative_undefined_at_the_guess_is_named_not_blamed_on_the_guess():
     """|v| has no derivative at v = 0, where the guess starts: the guess and parameters are
     finite, and the status says what is not."""
-    prb = Problem(10)
-    p = prb.create_state_variable("p", 2)
-    v = prb.create_state_variable("v", 2)
-    a = prb.create_input_variable("a", 2)
-    prb.set_dynamics(cs.vertcat(v, a))
-    prb.set_dt(0.1)
-    p.set_bounds([0, 0], [0, 0], nodes=0)
-    v.set_bounds([0, 0], [0, 0], nodes=0)
-    prb.create_cost("effort", a, weight=0.1)
-    prb.create_cost("speed", cs.norm_2(v), weight=0.1)
-    prb.create_final_cost("goal", p - [1.0, 0.5], weight=10.0)
-    solver = make_solver("gnsqp", prb)
+    solver = make_solver("gnsqp", double_integrator_with_a_nan_derivative_at_rest())
     assert solver.solve() is False
     assert solver.stats.status == ("cost gradient not finite at the initial guess (a "
                                    "derivative undefined there)")

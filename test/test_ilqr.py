@@ -3,7 +3,7 @@
 import casadi as cs
 import numpy as np
 import pytest
-from ocps import pendulum_swing_up
+from ocps import double_integrator_with_a_nan_derivative_at_rest, pendulum_swing_up
 
 from horizon_mpc import Problem, make_solver
 from horizon_mpc.examples import pendulum_dynamics
@@ -622,31 +622,15 @@ def test_a_receding_horizon_around_an_obstacle_converges_on_every_tick():
         assert solver.stats.iterations <= 200
 
 
-def _double_integrator_with_a_nan_derivative_at_rest() -> Problem:
-    """A feasible guess (at rest) where the speed residual |v| has no derivative."""
-    prb = Problem(20)
-    p = prb.create_state_variable("p", 2)
-    v = prb.create_state_variable("v", 2)
-    a = prb.create_input_variable("a", 2)
-    prb.set_dynamics(cs.vertcat(v, a))
-    prb.set_dt(0.1)
-    p.set_bounds([0, 0], [0, 0], nodes=0)
-    v.set_bounds([0, 0], [0, 0], nodes=0)
-    prb.create_cost("effort", a, weight=0.1)
-    prb.create_cost("speed", cs.norm_2(v), weight=0.1)
-    prb.create_final_cost("goal", p - [1.0, 0.5], weight=10.0)
-    return prb
-
-
 @pytest.mark.parametrize("opts", [{}, {"codegen": False}, {"equality": "lagrangian"},
                                   {"input_bounds": "box"}, {"line_search": False}])
 def test_a_point_where_no_step_can_be_computed_is_never_called_converged(opts):
     """The guess is feasible and the linearisation NaN there: no step, so nothing is known
     about stationarity (it was 'converged' at iteration 1, unmoved, 12.5 above nothing)."""
-    solver = make_solver("ilqr", _double_integrator_with_a_nan_derivative_at_rest(), opts)
+    solver = make_solver("ilqr", double_integrator_with_a_nan_derivative_at_rest(), opts)
     assert solver.solve() is False
     assert solver.stats.status == "linearisation not finite (NaN/Inf) at every regularisation"
-    rti = make_solver("ilqr", _double_integrator_with_a_nan_derivative_at_rest(),
+    rti = make_solver("ilqr", double_integrator_with_a_nan_derivative_at_rest(),
                       {**opts, "rti": True})
     assert rti.solve() is False and rti.stats.success is False
 
@@ -655,27 +639,14 @@ def test_a_resolve_after_an_infeasible_solve_starts_without_its_diverged_multipl
     """A state box that makes the final upright state unreachable: the solve fails, its
     final equality's multiplier blows up (1.7e11); with the box relaxed the same solver must
     reach the optimum as a fresh one does (it stopped at max_iter, cost 147.5, before)."""
-    def swing_up():
-        prb = Problem(60)
-        th = prb.create_state_variable("th", 1)
-        om = prb.create_state_variable("om", 1)
-        u = prb.create_input_variable("u", 1)
-        prb.set_dynamics(cs.vertcat(om, -9.81 * cs.sin(th) + u))
-        prb.set_dt(0.05)
-        th.set_bounds(0, 0, nodes=0)
-        om.set_bounds(0, 0, nodes=0)
-        u.set_bounds(-5, 5)
-        prb.create_cost("effort", u, weight=0.1)
-        prb.create_final_constraint("up", cs.vertcat(th - np.pi, om))
-        return prb, th
-
-    prb, th = swing_up()
+    prb = pendulum_swing_up(5.0)
+    x = prb.get_variable("x")
     solver = make_solver("ilqr", prb)
-    th.set_bounds(-0.5, 0.5, nodes=range(1, 60))
+    x.set_bounds([-0.5, -np.inf], [0.5, np.inf], nodes=range(1, 60))
     assert not solver.solve()
     assert np.abs(solver._alN.lam).max() == 0.0  # forgotten: they were past rho_max
-    th.set_bounds(-np.inf, np.inf, nodes=range(1, 60))
+    x.set_bounds(-np.inf, np.inf, nodes=range(1, 60))
     assert solver.solve(), solver.stats.status
-    fresh = make_solver("ilqr", swing_up()[0])
+    fresh = make_solver("ilqr", pendulum_swing_up(5.0))
     assert fresh.solve()
     assert solver.stats.cost == pytest.approx(fresh.stats.cost, rel=1e-6)

@@ -5,6 +5,7 @@ active."""
 import casadi as cs
 import numpy as np
 import pytest
+from ocps import planar_double_integrator_at_rest
 from scipy.optimize import minimize
 
 from horizon_mpc import Problem, make_solver
@@ -287,14 +288,7 @@ def _waypoint_with_bounded_inputs():
     """A planar double integrator tracking (1, -0.5) through the waypoint (0.5, 0.5) at node
     10 of 30, |u| <= 2: the waypoint's rows, moved onto node 9's inputs, ask 100x the bound
     of them in one step."""
-    prb = Problem(30)
-    p = prb.create_state_variable("p", 2)
-    v = prb.create_state_variable("v", 2)
-    u = prb.create_input_variable("u", 2)
-    prb.set_dynamics(cs.vertcat(v, u))
-    prb.set_dt(0.1)
-    p.set_bounds([0, 0], [0, 0], nodes=0)
-    v.set_bounds([0, 0], [0, 0], nodes=0)
+    prb, p, v, u = planar_double_integrator_at_rest(30)
     u.set_bounds([-2, -2], [2, 2])
     prb.create_cost("track", p - [1.0, -0.5], weight=10.0)
     prb.create_cost("effort", u, weight=0.01)
