@@ -262,7 +262,9 @@ def test_prepared_ticks_are_feedback_steps_that_trot_a_perfect_model(walking_mpc
 
 def test_a_state_at_the_prepared_time_up_to_round_off_gets_the_feedback_step(walking_mpc):
     """prepare(t + dt) in floating point is 1e-17 s off a state stamped (k + 1) dt: the
-    same tick time (SAME_TIME), not a miss; a microsecond off is one (max_extrapolation 0)."""
+    same tick time (SAME_TIME), the plan at the prepared time; a state 1.5 ms off (a robot's
+    driver stamps when it measures) gets the prepared step as measured, the plan at its own
+    time (feedback_tolerance); 3 ms off, a whole tick (max_extrapolation 0)."""
     from horizon_mpc.mpc.controller import SAME_TIME
     from horizon_mpc.posture import standing_configuration
 
@@ -277,9 +279,18 @@ def test_a_state_at_the_prepared_time_up_to_round_off_gets_the_feedback_step(wal
     assert mpc.prepare(t_next, None)
     plan = mpc.update(0.12, plan.q[:, 1], plan.v[:, 1], None)
     assert mpc.solver.stats.status == "feedback" and mpc.prepare_misses == misses
+    assert plan.t0 == 0.12  # the state's own stamp
+    assert mpc.settings.feedback_tolerance == 0.002
     assert mpc.prepare(0.14, None)
-    plan = mpc.update(0.14 + 1e-6, plan.q[:, 1], plan.v[:, 1], None)
+    q, v = plan.q[:, 1].copy(), plan.v[:, 1].copy()
+    plan = mpc.update(0.1415, q, v, None)
+    assert mpc.solver.stats.status == "feedback" and mpc.prepare_misses == misses
+    assert plan.t0 == 0.1415
+    np.testing.assert_array_equal(mpc.solver.x_init, np.concatenate((q, v)))  # as measured
+    assert mpc.prepare(0.16, None)
+    plan = mpc.update(0.163, plan.q[:, 1], plan.v[:, 1], None)
     assert mpc.solver.stats.status == "rti" and mpc.prepare_misses == misses + 1
+    assert plan.t0 == 0.163
 
 
 def test_the_dynamics_pattern_covers_every_nonzero_of_the_walking_jacobians(walking_mpc):

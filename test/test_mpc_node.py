@@ -900,6 +900,43 @@ def test_a_timer_tick_plans_from_the_state_of_the_prepared_time_when_it_came(con
         node.destroy_node()
 
 
+def test_a_drivers_states_off_the_tick_times_get_the_prepared_feedback_steps(context,
+                                                                               walking_mpc):
+    """A robot's driver stamps its states when it measures them (500 Hz, jittered), never
+    on the node's tick times: every tick ran whole and the diagnostics warned of prepare
+    misses forever (96 of 97 ticks). The state nearest the prepared time within
+    feedback_tolerance (2 ms) gets the prepared step; the plan is stamped with its time."""
+    node = sim_time_node(context, walking_mpc, trigger="timer", prepare_ahead=True)
+    try:
+        sent, sent_diag = Sent(), Sent()
+        node._pub_traj, node._pub_path, node._pub_diag = sent, Sent(), sent_diag
+        _, q = standing_configuration(node.mpc.cfg)
+        start, period, driver = 10 * NS_PER_S + 317_000, 20_000_000, 2_000_000
+        jitter = [0, 410_000, -380_000, 150_000, -90_000, 330_000, -270_000]
+        stamps, k = [], 0
+        for tick in range(12):
+            while start + k * driver <= start + tick * period + 600_000:
+                stamp = start + k * driver + jitter[k % len(jitter)]
+                _feed_state(node, stamp, q)
+                stamps.append(stamp)
+                k += 1
+            if tick == 0:
+                assert node.tick()  # the bootstrap
+                misses = node.mpc.prepare_misses
+                continue
+            prepared = node._prepared_ns
+            assert node.tick()
+            used = time_to_ns(sent.msgs[-1].header.stamp)
+            assert used == min(stamps[-8:], key=lambda x: abs(x - prepared))
+            assert abs(used - prepared) <= 2_000_000
+            assert node.mpc.solver.stats.status == "feedback"
+        assert node.mpc.prepare_misses == misses
+        assert sent_diag.msgs[-1].status[0].level == DiagnosticStatus.OK
+    finally:
+        walking_mpc.settings.prepare_ahead = False  # the fixture is shared
+        node.destroy_node()
+
+
 def test_prepare_ahead_ticks_are_feedback_steps_stamped_at_their_plan_time(context,
                                                                              walking_mpc):
     """With prepare_ahead, a state on the prepared tick time is answered by the feedback

@@ -209,9 +209,10 @@ class WalkingMpc:
         """One MPC tick at time ``t`` (s) from the measured ``q`` (nq), ``v`` (nv).
 
         ``cmd``: desired base velocity ``(vx, vy, wz)`` in the base frame (None: zero).
-        After :meth:`prepare` for a time within ``settings.max_extrapolation`` of ``t``,
-        the tick is only the feedback step of the prepared iteration (``cmd`` was taken at
-        the preparation); otherwise it is the whole tick.
+        After :meth:`prepare` for a time within ``settings.max_extrapolation`` or
+        ``settings.feedback_tolerance`` of ``t``, the tick is only the feedback step of the
+        prepared iteration (``cmd`` was taken at the preparation); otherwise it is the whole
+        tick.
 
         Raises:
             ValueError: a state of the wrong shape or not finite, a time not finite, a
@@ -304,13 +305,20 @@ class WalkingMpc:
     def _feedback(self, t: float, q: np.ndarray, v: np.ndarray) -> Plan | None:
         """The feedback phase of the prepared iteration from the state measured at ``t``
         (checked: :meth:`_checked_state`); None when ``t`` is too far from the prepared time
-        (the caller runs a whole tick)."""
+        (the caller runs a whole tick).
+
+        At the prepared time (``SAME_TIME``) the plan starts there; within
+        ``settings.max_extrapolation`` the state is predicted to it; within
+        ``settings.feedback_tolerance`` the prepared step takes the state as measured and
+        the plan starts at ``t``."""
+        st = self.settings
         t_plan, self._prepared_for = self._prepared_for, None
         lead = t_plan - t
-        if abs(lead) > self.settings.max_extrapolation + SAME_TIME or not self.solver.prepared:
+        if abs(lead) > max(st.max_extrapolation, st.feedback_tolerance) + SAME_TIME or (
+                not self.solver.prepared):
             self.prepare_misses += 1
             return None
-        if abs(lead) > SAME_TIME:
+        if SAME_TIME < abs(lead) <= st.max_extrapolation + SAME_TIME:
             # the state predicted to the prepared time with the plan's acceleration over that
             # stretch (the last plan's node ending at the prepared time before it, the
             # prepared warm start's first after it); a constant-velocity prediction kept the

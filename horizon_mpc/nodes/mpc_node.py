@@ -129,6 +129,7 @@ class MpcNode(MpcParameters, Node):
                 "100 Hz in 3 of 5 real-time runs even without it, and at 2.9 s in the "
                 "lockstep closed loop")
         settings.max_extrapolation = float(self._p("max_extrapolation"))
+        settings.feedback_tolerance = float(self._p("feedback_tolerance"))
         settings.weights = self._weights_from_parameters(settings.weights)
 
         for note in gait_warnings(g.name):
@@ -391,17 +392,22 @@ class MpcNode(MpcParameters, Node):
         a prepare miss (a whole tick, ~2x the work; 12 % of go2's ticks with a 250 Hz
         simulator) or a prediction of the state (solo12 fell at 0.4 m/s, 2 of 2 real-time
         runs). The plan is stamped with its state's time, and a simulator follows it by
-        that stamp."""
+        that stamp.
+
+        Without one at the prepared time (a robot's driver stamps its states when it
+        measures them), the pair nearest to it within the MPC's ``feedback_tolerance``
+        (and ``max_extrapolation``), whose feedback step the preparation serves."""
         base_stamps = {b[0]: b for b in self._base_recent}
+        pairs = [(j, base_stamps[j[0]]) for j in self._joints_recent if j[0] in base_stamps]
         prepared = self._prepared_ns if self.mpc.prepared_for is not None else None
-        if prepared is not None and prepared in base_stamps:
-            for joints in self._joints_recent:
-                if joints[0] == prepared:
-                    return joints, base_stamps[prepared]
-        for joints in reversed(self._joints_recent):
-            base = base_stamps.get(joints[0])
-            if base is not None:
-                return joints, base
+        if prepared is not None and pairs:
+            st = self.mpc.settings
+            window = max(st.max_extrapolation, st.feedback_tolerance) * NS_PER_S
+            nearest = min(pairs, key=lambda pair: abs(pair[0][0] - prepared))
+            if abs(nearest[0][0] - prepared) <= window:
+                return nearest
+        if pairs:
+            return pairs[-1]
         return self._joints, self._base
 
     # ------------------------------------------------------------------ the tick
@@ -470,11 +476,14 @@ class MpcNode(MpcParameters, Node):
                 # a late state now and then (a loaded simulator) costs one whole tick and is
                 # counted (diagnostics prepare_misses); warned about when it is the rule
                 if self._recent_misses[-1] and self._misses_are_the_rule():
+                    tol = self.mpc.settings.feedback_tolerance
                     self._warn("prepare_miss", f"state stamped {t:.4f} s, "
-                               f"{abs(self._prepared_ns - stamp_ns) / 1e6:.1f} ms from the "
-                               f"prepared tick time: ran a whole tick ({self._misses_text()}): "
-                               "states come off the tick times (a loaded machine delays "
-                               "them, or control_rate is not their rate)")
+                               f"{abs(self._prepared_ns - stamp_ns) / 1e6:.3f} ms from the "
+                               f"prepared tick time (feedback_tolerance {tol * 1e3:g} ms): "
+                               f"ran a whole tick ({self._misses_text()}): no state comes "
+                               "near the tick times (a loaded machine delays them, "
+                               "control_rate is not their rate, or their stamps are further "
+                               "apart than feedback_tolerance)")
         except Exception as exc:  # noqa: BLE001 - the node must outlive any solver error
             self.solver_errors += 1
             self._warn("solver", f"MPC tick failed ({type(exc).__name__}: {exc}); "
@@ -562,8 +571,8 @@ class MpcNode(MpcParameters, Node):
                 self._warn("infeasible", message)
             elif ok and self._misses_are_the_rule():
                 level = DiagnosticStatus.WARN
-                message = (f"prepare misses in {self._misses_text()}: whole ticks, late "
-                           "states (a loaded machine?)")
+                message = (f"prepare misses in {self._misses_text()}: whole ticks, no "
+                           "state within feedback_tolerance of the tick times")
             self._solve_time_max = max(self._solve_time_max, self.last_solve_time)
         now_ns = self.get_clock().now().nanoseconds if now_ns is None else now_ns
         last = self._last_diag  # a rising level (OK -> WARN) goes out at once

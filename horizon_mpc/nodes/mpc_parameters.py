@@ -147,6 +147,11 @@ class MpcParameters:
           "(s) from the prepared tick time is predicted to it with the plan's acceleration; "
           "further: a whole tick (0: no prediction; a timer tick takes the state of the "
           "prepared time when one came)", float_range(0, 1), ro=True)
+        d("feedback_tolerance", float(st.feedback_tolerance), "a state stamped up to this "
+          "far (s) from the prepared tick time, and not predicted (max_extrapolation), gets "
+          "the prepared feedback step as measured, the plan starting at its stamp; further: "
+          "a whole tick (a robot's driver never stamps on the tick times)",
+          float_range(0, 1), ro=True)
         d("trigger", "timer", "'timer': tick at control_rate; 'state': tick on each new "
           "(joint_states, odom) pair with equal stamps (simulator lockstep)", ro=True)
         d("state_reliability", "reliable", "QoS reliability of the joint_states and odom "
