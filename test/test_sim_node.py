@@ -357,6 +357,31 @@ def test_node_process_exits_cleanly_on_signals(sig):
             proc.kill()
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_second_signal_during_the_shutdown_still_exits_0(sig):
+    """Ctrl-C under ros2 launch: the terminal signals the process group, launch forwards its
+    own SIGINT a few ms later; that one killed the teardown (exit -2 / -15)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "horizon_mpc.nodes.sim_node", "--ros-args", "-p",
+         "robot:=solo12"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        env=dict(os.environ, PYTHONUNBUFFERED="1"), text=True,
+    )
+    try:
+        for line in proc.stdout:
+            if "simulating solo12" in line:
+                break
+        time.sleep(0.3)
+        proc.send_signal(sig)
+        time.sleep(0.03)
+        if proc.poll() is None:
+            proc.send_signal(sig)
+        assert proc.wait(timeout=10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
 def test_the_sim_loads_the_robot_description_it_is_given_and_removes_its_file(context):
     from horizon_mpc.robots import example_robot_files
 

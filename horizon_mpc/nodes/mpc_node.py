@@ -642,7 +642,8 @@ def main(args: Sequence[str] | None = None) -> int:
     use_sim_time:=false``).
     """
     return spin_until_signal(_node_with_frozen_startup,
-                             list(sys.argv if args is None else args), usage)
+                             list(sys.argv if args is None else args), usage,
+                             process_exits=True)
 
 
 def usage() -> str:

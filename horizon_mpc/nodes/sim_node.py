@@ -424,7 +424,7 @@ class SimNode(Node):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Entry point of ``ros2 run horizon_mpc sim_node``; exit code 0 on SIGINT/SIGTERM."""
-    return spin_until_signal(SimNode, args, usage)
+    return spin_until_signal(SimNode, args, usage, process_exits=True)
 
 
 def usage() -> str:

@@ -30,8 +30,15 @@ _USER_ERRORS = (ValueError, KeyError, OSError, ParameterException, yaml.YAMLErro
 
 
 def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None = None,
-                      usage: str | Callable[[], str] | None = None) -> int:
+                      usage: str | Callable[[], str] | None = None,
+                      process_exits: bool = False) -> int:
     """Create the node with ``make_node`` and spin it until SIGINT/SIGTERM; returns 0.
+
+    ``process_exits``: the caller ends the process with the returned code (an executable's
+    ``main``): SIGINT and SIGTERM are then ignored from the return on, not given back to
+    their previous handlers. Ctrl-C under ``ros2 launch`` signals the process group, and
+    launch forwards its own SIGINT a few ms later: that second signal killed the
+    interpreter's teardown, exit code -2 or -15 instead of 0.
 
     ``args``: the process's arguments (``sys.argv`` when None; the first is the program).
     ``-h``/``--help`` before ``--ros-args`` prints ``usage`` (a text, or a function that
@@ -67,11 +74,11 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except RuntimeError as exc:  # rclpy's RCLError: e.g. a dangling '-p'
         sys.stderr.write(f"cannot start: bad ROS arguments: {exc}\n")
-        _restore(previous)
+        _release(previous, process_exits)
         return 2
     except _StartupInterrupted:
         rclpy.try_shutdown()
-        _restore(previous)
+        _release(previous, process_exits)
         return 0
     node: Node | None = None
     executor = SingleThreadedExecutor()
@@ -119,7 +126,7 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        _restore(previous)
+        _release(previous, process_exits)
     return 0
 
 
@@ -188,9 +195,11 @@ class _StartupInterrupted(BaseException):
     error handling must not swallow it)."""
 
 
-def _restore(handlers: dict) -> None:
-    for sig, handler in handlers.items():
-        signal.signal(sig, handler)
+def _release(previous: dict, process_exits: bool) -> None:
+    """The signals' previous handlers back, or (``process_exits``) ignore them: the process
+    ends next, and a second signal must not kill its teardown."""
+    for sig, handler in previous.items():
+        signal.signal(sig, signal.SIG_IGN if process_exits else handler)
 
 
 class _RosLogHandler(logging.Handler):
