@@ -515,10 +515,50 @@ def test_a_state_stamped_in_the_future_is_not_planned_from(harness):
     h.spin_until(lambda: h.node.plan is not None)
 
 
+def test_one_stream_stamped_in_the_future_is_not_planned_from(harness):
+    """joint_states 1 s ahead of the clock with a correct odom: the plan's stamp is the
+    older stream's, and the newer one was never compared with the clock (planned from, no
+    warning)."""
+    h = harness(trigger="timer", control_rate=50.0, state_timeout=0.2)
+    for _ in range(5):
+        now = h.probe.get_clock().now().nanoseconds
+        q = h.q
+        h.pub_js.publish(joint_state_to_msg(time_from_ns(now + NS_PER_S), h.node.joint_names,
+                                            q[7:], np.zeros(len(q) - 7)))
+        h.pub_odom.publish(odometry_to_msg(time_from_ns(now), q[:3], q[3:7], np.zeros(3),
+                                           np.zeros(3)))
+        h.spin_for(0.05)
+    h.spin_until(lambda: h.node.stale_skips > 0)
+    assert h.trajectories == [] and h.node.plan is None
+    assert "future" in h.node._last_warn
+    assert h.node.last_state_age == pytest.approx(-1.0, abs=0.3)
+
+
 def test_no_state_means_no_trajectory(harness):
     h = harness(trigger="timer", control_rate=50.0)
     h.spin_for(0.3)
     assert h.trajectories == [] and h.node.ticks == 0
+
+
+def test_rejected_commands_keep_the_last_valid_one_until_its_timeout_and_say_so(harness,
+                                                                                 monkeypatch):
+    """A NaN cmd_vel stream after a valid command: the valid one stands until cmd_timeout
+    after it came, then zero; the warnings said 'keeping the previous command' and then
+    'no cmd_vel' while cmd_vel kept arriving."""
+    h = harness(cmd_timeout=0.2)
+    said: dict[str, str] = {}
+    monkeypatch.setattr(h.node, "_warn", lambda kind, text: said.setdefault(kind, text))
+    h.pub_cmd.publish(twist(0.3, 0.0, 0.0))
+    h.spin_until(lambda: h.node._cmd is not None)
+    for _ in range(3):
+        h.pub_cmd.publish(twist(float("nan"), 0.0, 0.0))
+    h.spin_until(lambda: h.node.rejected["cmd_vel"] == 3)
+    np.testing.assert_array_equal(h.node.command, [0.3, 0.0, 0.0])
+    assert "the last valid one stands until cmd_timeout (0.2 s)" in said["cmd_vel"]
+    time.sleep(0.3)
+    np.testing.assert_array_equal(h.node.command, [0.0, 0.0, 0.0])
+    assert said["cmd_timeout"] == ("no valid cmd_vel for more than 0.2 s (3 rejected "
+                                   "since); commanding zero velocity")
 
 
 def test_a_stale_command_becomes_zero(harness):

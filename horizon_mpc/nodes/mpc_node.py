@@ -200,6 +200,7 @@ class MpcNode(MpcParameters, Node):
         self._base_recent: deque[tuple] = deque(maxlen=_RECENT_STATES)
         self._cmd: tuple[float, np.ndarray] | None = None
         self._cmd_timed_out = True
+        self._cmd_rejected = 0  # cmd_vel messages rejected since the last valid one
         self._last_tick_stamp: int | None = None
         self.plan: Plan | None = None
         self.ticks = 0
@@ -314,8 +315,10 @@ class MpcNode(MpcParameters, Node):
                        "cmd_vel: dropped it; commanding zero velocity")
         if self._cmd is None or age > self.cmd_timeout:
             if self._cmd is not None and not self._cmd_timed_out:
-                self._warn("cmd_timeout", f"no cmd_vel for more than {self.cmd_timeout:g} s; "
-                           "commanding zero velocity")
+                rejected = (f" ({self._cmd_rejected} rejected since)" if self._cmd_rejected
+                            else "")
+                self._warn("cmd_timeout", f"no valid cmd_vel for more than "
+                           f"{self.cmd_timeout:g} s{rejected}; commanding zero velocity")
             self._cmd_timed_out = True
             return np.zeros(3)
         self._cmd_timed_out = False
@@ -356,7 +359,9 @@ class MpcNode(MpcParameters, Node):
                                             st.max_command_norm)
         except ValueError as exc:
             self.rejected["cmd_vel"] += 1
-            self._warn("cmd_vel", f"rejected cmd_vel: {exc}; keeping the previous command")
+            self._cmd_rejected += 1
+            self._warn("cmd_vel", f"rejected cmd_vel: {exc}; the last valid one stands until "
+                       f"cmd_timeout ({self.cmd_timeout:g} s) after it came, then zero")
             return
         if self.mpc.scheduler.gait.stands and np.any(cmd != 0.0):
             notes.append(f"gait {self.mpc.settings.gait.name!r} never lifts a foot: cmd_vel "
@@ -364,6 +369,7 @@ class MpcNode(MpcParameters, Node):
         for note in notes:
             self._warn(_note_kind("cmd_vel", note), note)
         self._cmd = (self.now(), cmd)
+        self._cmd_rejected = 0
 
     def _maybe_tick_on_state(self) -> None:
         if self.trigger == "state" and self._joints is not None and self._base is not None \
@@ -448,9 +454,14 @@ class MpcNode(MpcParameters, Node):
             return self._skip_stale(age, "stale", f"the state is {age:.3f} s old "
                                     f"(state_timeout {self.state_timeout:g} s); not planning",
                                     stamp_ns, now_ns)
-        if -age > self.state_timeout:  # stamped ahead of the node's clock: clocks differ
-            return self._skip_stale(age, "future", f"the state is stamped {-age:.3f} s ahead "
-                                    "of the node's clock (more than state_timeout "
+        # stamped ahead of the node's clock: clocks differ. Either stream: the plan's stamp
+        # is the older one's, and a joint_states stream 1 s ahead of a correct odom was
+        # planned from without a word
+        ahead_ns, stream = max((joints[0], "joint_states"), (base[0], "odom"))
+        ahead = (ahead_ns - now_ns) / NS_PER_S
+        if ahead > self.state_timeout:
+            return self._skip_stale(-ahead, "future", f"{stream} is stamped {ahead:.3f} s "
+                                    "ahead of the node's clock (more than state_timeout "
                                     f"{self.state_timeout:g} s): not planning; do the "
                                     "publisher and this node use the same clock "
                                     "(use_sim_time)?", stamp_ns, now_ns)
