@@ -1296,6 +1296,35 @@ def test_timing_settings_outside_where_the_robot_walked_are_warned_about():
     assert timing_warnings(0.02, 20, 0.02, 6) == []
 
 
+def test_gait_settings_and_weights_outside_where_the_trot_walked_are_warned_about(harness,
+                                                                                monkeypatch):
+    """Accepted values that made the go2 fall (step_duration 0.8 s or more, duty factor 0.1,
+    weights at 2e4x their defaults and more) were set without a word."""
+    from horizon_mpc.locomotion.settings import Weights
+    from horizon_mpc.nodes.mpc_parameters import gait_warnings, weight_warnings
+
+    assert gait_warnings("trot", 0.3, None) == gait_warnings("walk", 0.7, 0.15) == []
+    assert any("step_duration 0.8 s is outside 0.15-0.7 s" in w
+               for w in gait_warnings("trot", 0.8, None))
+    assert any("duty_factor 0.1 is outside" in w for w in gait_warnings("trot", 0.3, 0.1))
+    assert weight_warnings(Weights()) == []
+    heavy = weight_warnings(Weights(posture=30.0, base_position=1e6))
+    assert len(heavy) == 1 and heavy[0].startswith("w_base_position 1e+06 is up to 2e+04x")
+    h = harness()
+    warned: list[str] = []
+    logger = h.node.get_logger()
+    monkeypatch.setattr(logger, "warning", lambda text, *a, **k: warned.append(text))
+    monkeypatch.setattr(h.node, "get_logger", lambda: logger)
+    assert h.node.set_parameters([Parameter("step_duration", value=1.0)])[0].successful
+    assert any("step_duration 1 s is outside" in w for w in warned)
+    warned.clear()
+    assert h.node.set_parameters([Parameter("w_base_orientation", value=1e8)])[0].successful
+    assert len(warned) == 1 and warned[0].startswith("w_base_orientation 1e+08")
+    warned.clear()
+    assert h.node.set_parameters([Parameter("max_vx", value=0.4)])[0].successful
+    assert warned == []  # a weight set before is not warned about again
+
+
 def test_prepare_ahead_needs_whole_nodes_per_tick(context, walking_mpc):
     """100 Hz at dt 0.02 s (half a node a tick): go2 fell at 2.3-2.5 s in real time with
     prepare_ahead, walked with whole ticks."""

@@ -58,6 +58,7 @@ from horizon_mpc.nodes.mpc_parameters import (
     gait_warnings,
     parameter_table,
     timing_warnings,
+    weight_warnings,
 )
 from horizon_mpc.nodes.robot_description import check_urdf_text
 from horizon_mpc.nodes.spin import spin_until_signal
@@ -132,7 +133,8 @@ class MpcNode(MpcParameters, Node):
         settings.feedback_tolerance = float(self._p("feedback_tolerance"))
         settings.weights = self._weights_from_parameters(settings.weights)
 
-        for note in gait_warnings(g.name):
+        for note in (*gait_warnings(g.name, g.step_duration, g.duty_factor),
+                     *weight_warnings(settings.weights)):
             self.get_logger().warning(note)
         for note in timing_warnings(settings.dt, settings.n_nodes,
                                     1.0 / self._p("control_rate"),

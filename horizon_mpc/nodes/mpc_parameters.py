@@ -27,7 +27,7 @@ from horizon_mpc.nodes.declare import declare, float_range, int_range
 __all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MIN_DUTY_FACTOR",
            "MODEL_PARAMETERS", "MODEL_PARAMETER_DECLARATIONS", "WEIGHT_FIELDS", "MpcParameters",
            "gait_duty_factor", "gait_warnings", "parameter_names", "parameter_table",
-           "timing_warnings"]
+           "timing_warnings", "weight_warnings"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
@@ -56,6 +56,14 @@ WALKED_DT = (0.01, 0.035)  # s; 0.04 fell
 # session 20); 12 fell
 WALKED_MIN_NODES = 20
 WALKED_MAX_NODES_PER_TICK = 5  # 10 Hz at dt 0.02 walked; 5 Hz (10 nodes a tick) fell
+# the trot, direct lockstep loop at 0.3 m/s for 5 s (session 23): step durations 0.15-0.7 s
+# walked (0.1 fell at 4.3 s, 0.8 at 2.6 s), duty factors 0.15-0.9 (0.1 fell at 2.6 s);
+# weights up to ~1000x their library defaults (base_position at 1000x, posture at 1e4x,
+# base_orientation at 1e4x), and it fell with base_position at 2e4x, posture and
+# base_orientation at 1e6x and more
+WALKED_STEP_DURATION = (0.15, 0.7)
+WALKED_DUTY_FACTOR = (0.15, 0.9)
+WALKED_WEIGHT_RATIO = 1000.0
 
 
 def gait_duty_factor(value: float) -> float | None:
@@ -69,14 +77,43 @@ def gait_duty_factor(value: float) -> float | None:
     return float(value) or None
 
 
-def gait_warnings(gait: str) -> list[str]:
-    """What is known to go wrong with ``gait`` (empty when nothing is)."""
+def gait_warnings(gait: str, step_duration: float | None = None,
+                  duty_factor: float | None = None) -> list[str]:
+    """What is known to go wrong with ``gait`` and, when given, its step duration (s) and
+    duty factor (None or 0: the gait's own) outside where the trot walked (empty when
+    nothing is)."""
+    out = []
     if gait in EXPERIMENTAL_GAITS:
-        return [f"gait {gait!r} is experimental: it does not walk in the lockstep closed loop "
-                f"({EXPERIMENTAL_GAITS[gait]}; doc/locomotion.md); trot and walk do"]
+        out.append(f"gait {gait!r} is experimental: it does not walk in the lockstep closed "
+                   f"loop ({EXPERIMENTAL_GAITS[gait]}; doc/locomotion.md); trot and walk do")
     if gait == "stand":
         return ["gait 'stand': the feet stay down and cmd_vel is not followed"]
-    return []
+    lo, hi = WALKED_STEP_DURATION
+    if step_duration is not None and not lo <= step_duration <= hi:
+        out.append(f"step_duration {step_duration:g} s is outside {lo:g}-{hi:g} s, where the "
+                   "go2 trot walked (0.1 and 0.8 s fell in the lockstep loop)")
+    lo, hi = WALKED_DUTY_FACTOR
+    if duty_factor and not lo <= duty_factor <= hi:
+        out.append(f"duty_factor {duty_factor:g} is outside {lo:g}-{hi:g}, where the go2 trot "
+                   "walked (0.1 fell in the lockstep loop)")
+    return out
+
+
+def weight_warnings(weights: Weights, names: list[str] | None = None) -> list[str]:
+    """The weights (of ``names``, default all; without the ``w_`` prefix) more than
+    WALKED_WEIGHT_RATIO times their library defaults (empty when none is)."""
+    defaults = Weights()
+    out = []
+    for n in WEIGHT_FIELDS if names is None else names:
+        value = np.atleast_1d(np.asarray(getattr(weights, n), dtype=float))
+        default = np.atleast_1d(np.asarray(getattr(defaults, n), dtype=float))
+        ratio = np.max(np.abs(value) / np.maximum(np.abs(default), 1e-300))
+        if ratio > WALKED_WEIGHT_RATIO:
+            shown = f"{float(value[0]):g}" if value.size == 1 else str(value.tolist())
+            out.append(f"w_{n} {shown} is up to {ratio:.3g}x its library default: the go2 "
+                       f"trot walked with weights up to ~{WALKED_WEIGHT_RATIO:g}x theirs and "
+                       "fell at 2e4x and more (doc/mpc_node.md)")
+    return out
 
 
 def timing_warnings(dt: float, n_nodes: int, period: float, publish_points: int,
@@ -252,9 +289,13 @@ class MpcParameters:
             self.mpc.wp.set_weights(st.weights)
         if new:
             self.get_logger().info(f"parameters updated live: {sorted(new)}")
-        if "gait" in new:
-            for note in gait_warnings(new["gait"]):
+        if any(n in new for n in LIVE_GAIT):
+            g = st.gait
+            for note in gait_warnings(g.name, g.step_duration, g.duty_factor):
                 self.get_logger().warning(note)
+        changed = [n[2:] for n in new if n.startswith("w_")]
+        for note in weight_warnings(st.weights, changed) if changed else []:
+            self.get_logger().warning(note)
         return SetParametersResult(successful=True)
 
 
