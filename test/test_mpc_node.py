@@ -1230,6 +1230,13 @@ def test_a_node_that_cannot_start_says_why_in_one_line_and_exits_1():
     assert out.returncode == 1
     assert "cannot start: no robot config 'spot'; available:" in out.stderr + out.stdout
     assert "Traceback" not in out.stderr
+    # an empty list: rcl gives no value, and rclpy's 'not initialized' said nothing useful
+    out = subprocess.run([sys.executable, "-m", "horizon_mpc.nodes.mpc_node", "--ros-args",
+                          "-p", "w_base_linear_velocity:=[]"], env=env, capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 1 and "Traceback" not in out.stderr
+    assert ("cannot start: parameter 'w_base_linear_velocity' was given no value (an empty "
+            "list?); its default is [40.0, 100.0, 10.0]") in out.stderr + out.stdout
 
 
 def test_the_librarys_warnings_reach_the_ros_loggers(monkeypatch):

@@ -45,6 +45,12 @@ def declare(node: Node, name: str, default: object, description: str,
         desc.integer_range = irng
     overrides = parameter_overrides(node)
     given = overrides.get(name)
+    if given is not None and given.type_ == Parameter.Type.NOT_SET:
+        # rcl reads '-p name:=[]' (an empty list) as no value: the declaration then left
+        # the parameter uninitialised, and reading it failed with rclpy's exception
+        wanted = (f"it takes a {default.name.lower().replace('_', ' ')}"
+                  if isinstance(default, Parameter.Type) else f"its default is {default!r}")
+        raise ValueError(f"parameter {name!r} was given no value (an empty list?); {wanted}")
     if (isinstance(default, float) and given is not None
             and given.type_ == Parameter.Type.INTEGER):
         overrides[name] = Parameter(name, value=float(given.value))
