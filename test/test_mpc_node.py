@@ -644,7 +644,10 @@ def test_an_array_weight_set_as_ros2_param_set_delivers_it_applies(harness):
     h.spin_until(lambda: h.trajectories)
 
 
-def test_sigterm_exits_cleanly_with_code_0():
+@pytest.mark.parametrize("second_after", [None, 0.1])
+def test_sigterm_exits_cleanly_with_code_0(second_after):
+    """Also with a second signal 100 ms after the first (ros2 launch forwarding its own
+    after the terminal's), which killed the interpreter's teardown: exit -15."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     proc = subprocess.Popen([sys.executable, "-m", "horizon_mpc.nodes.mpc_node"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -653,26 +656,10 @@ def test_sigterm_exits_cleanly_with_code_0():
             if "waiting for joint_states" in line:
                 break
         proc.send_signal(signal.SIGTERM)
-        assert proc.wait(timeout=20) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-
-
-def test_a_second_sigterm_during_the_shutdown_still_exits_0():
-    """A second signal 100 ms after the first (ros2 launch forwarding its own) killed the
-    interpreter's teardown: exit -15."""
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    proc = subprocess.Popen([sys.executable, "-m", "horizon_mpc.nodes.mpc_node"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        for line in proc.stdout:
-            if "waiting for joint_states" in line:
-                break
-        proc.send_signal(signal.SIGTERM)
-        time.sleep(0.1)
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
+        if second_after is not None:
+            time.sleep(second_after)
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=20) == 0
     finally:
         if proc.poll() is None:

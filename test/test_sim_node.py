@@ -337,8 +337,12 @@ def test_realtime_factor_paces_sim_time(harness_factory):
     assert 0.8 < rate < 1.1
 
 
+@pytest.mark.parametrize("second_after", [None, 0.03])
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_node_process_exits_cleanly_on_signals(sig):
+def test_node_process_exits_cleanly_on_signals(sig, second_after):
+    """Also with a second signal 30 ms after the first (Ctrl-C under ros2 launch: the
+    terminal signals the process group, launch forwards its own), which killed the
+    teardown: exit -2 / -15."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen(
         [sys.executable, "-m", "horizon_mpc.nodes.sim_node", "--ros-args", "-p",
@@ -351,31 +355,10 @@ def test_node_process_exits_cleanly_on_signals(sig):
                 break
         time.sleep(0.3)
         proc.send_signal(sig)
-        assert proc.wait(timeout=10) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-
-
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_a_second_signal_during_the_shutdown_still_exits_0(sig):
-    """Ctrl-C under ros2 launch: the terminal signals the process group, launch forwards its
-    own SIGINT a few ms later; that one killed the teardown (exit -2 / -15)."""
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "horizon_mpc.nodes.sim_node", "--ros-args", "-p",
-         "robot:=solo12"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-        env=dict(os.environ, PYTHONUNBUFFERED="1"), text=True,
-    )
-    try:
-        for line in proc.stdout:
-            if "simulating solo12" in line:
-                break
-        time.sleep(0.3)
-        proc.send_signal(sig)
-        time.sleep(0.03)
-        if proc.poll() is None:
-            proc.send_signal(sig)
+        if second_after is not None:
+            time.sleep(second_after)
+            if proc.poll() is None:
+                proc.send_signal(sig)
         assert proc.wait(timeout=10) == 0
     finally:
         if proc.poll() is None:
