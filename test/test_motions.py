@@ -619,3 +619,19 @@ def test_the_leap_events_follow_the_scheduled_flight_not_the_first_unloaded_run(
     assert best_overlap(runs, 22, 30) == (22, 30)
     assert best_overlap(runs, 21, 28) == (22, 30)
     assert best_overlap(runs, 10, 12) == (22, 30)  # no overlap: the longest
+
+
+@pytest.mark.slow
+def test_the_walk_with_a_gait_that_never_lifts_a_foot_is_summarised(tmp_path):
+    """gait 'stand' (no cycle: period inf): the summary averaged over 'the last cycles' and
+    the run ended in an OverflowError after the solve, no outputs."""
+    import json
+
+    from horizon_mpc.motions.cli import main
+
+    out = tmp_path / "stand"
+    assert main(["walk", "--set", "mpc={gait: {name: stand}}", "--set", "duration=1.0",
+                 "--out", str(out), "--no-animation"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["gait_period"] == "inf" and summary["window"] == [0.0, 1.0]
+    assert "force_periodicity" not in summary and summary["swing_apex"] is None

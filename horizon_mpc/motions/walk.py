@@ -254,14 +254,16 @@ def walk_summary(res: MotionResult, period: float, st: WalkSettings,
     ``yaw_rate_error``: the two parts (None where that reference is zero);
     ``distance``: the base's net displacement in the plane (m), ``path_length`` the length
     of its path;
-    ``force_periodicity``: ``||f(last cycle) - f(cycle before)|| / ||f(last cycle)||``;
+    ``force_periodicity``: ``||f(last cycle) - f(cycle before)|| / ||f(last cycle)||``
+    (absent for a gait without cycles, ``stand``: the window is then the whole motion);
     ``swing_apex``: ``[lowest, highest]`` apex over the planned swings (m above the foot's
     standing height), beside the gait's ``step_height`` (the clearance is a cost: an apex
     below it is the compromise the weights made).
     """
-    n_cycle = int(round(period / res.dt))
+    cyclic = math.isfinite(period)  # a gait that never lifts a foot has no cycle
+    n_cycle = int(round(period / res.dt)) if cyclic else res.n_nodes
     n_win = min(st.average_cycles * n_cycle, res.n_nodes)
-    if n_win < st.average_cycles * n_cycle:
+    if cyclic and n_win < st.average_cycles * n_cycle:
         log.warning("walk of %.2f s: shorter than the %d gait cycles (%.2f s) the velocity "
                     "is averaged over; averaging over all of it, start-up included",
                     res.t[-1], st.average_cycles, st.average_cycles * period)
@@ -275,7 +277,7 @@ def walk_summary(res: MotionResult, period: float, st: WalkSettings,
            "gait_period": period,
            "distance": float(np.linalg.norm(res.q[:2, -1] - res.q[:2, 0])),  # net, start to end
            "path_length": float(np.sum(np.linalg.norm(np.diff(res.q[:2], axis=1), axis=0)))}
-    if res.n_nodes >= 2 * n_cycle:
+    if cyclic and res.n_nodes >= 2 * n_cycle:
         last, prev = res.f[:, -n_cycle:], res.f[:, -2 * n_cycle:-n_cycle]
         out["force_periodicity"] = float(np.linalg.norm(last - prev) / np.linalg.norm(last))
     z = foot_heights(model, res)
