@@ -605,7 +605,7 @@ def test_motion_executable_writes_every_output(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == [
         "animation.gif", "base_and_torques.png", "contact_forces.png", "solution.npz",
         "summary.json"]
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "summary.json").read_text())["results"]
     assert summary["settings"]["duration"] == 0.6 and summary["nodes"] == 30
 
 
@@ -632,6 +632,6 @@ def test_the_walk_with_a_gait_that_never_lifts_a_foot_is_summarised(tmp_path):
     out = tmp_path / "stand"
     assert main(["walk", "--set", "mpc={gait: {name: stand}}", "--set", "duration=1.0",
                  "--out", str(out), "--no-animation"]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "summary.json").read_text())["results"]
     assert summary["gait_period"] == "inf" and summary["window"] == [0.0, 1.0]
     assert "force_periodicity" not in summary and summary["swing_apex"] is None
