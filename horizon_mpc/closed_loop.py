@@ -395,9 +395,13 @@ def control_period(robot: str, mpc_parameters: Mapping[str, object] | None = Non
     dt=0.03`` a third of the periods were reported without a tick, none missing)."""
     given = dict(mpc_parameters or {})
     name = "control_rate" if "control_rate" in given else "dt"
-    value = float(given.get(name, MpcSettings.from_dict(
-        load_robot_config(robot).section("mpc")).dt))
-    if not (math.isfinite(value) and value > 0.0):
+    raw = given.get(name, MpcSettings.from_dict(load_robot_config(robot).section("mpc")).dt)
+    try:
+        value = float(raw)  # a YAML number; a bool or a list is no rate
+        ok = not isinstance(raw, bool)
+    except (TypeError, ValueError):
+        ok = False
+    if not (ok and math.isfinite(value) and value > 0.0):
         # the node refuses it too; here first, before dividing by it
         raise SettingError(f"{name} must be a finite number > 0, got {given[name]!r}")
     return 1.0 / value if name == "control_rate" else value

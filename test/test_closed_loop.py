@@ -643,6 +643,13 @@ def test_the_control_period_is_the_nodes(tmp_path):
     assert control_period("go2") == pytest.approx(0.02)
     assert control_period("go2", {"dt": 0.03}) == pytest.approx(0.03)
     assert control_period("go2", {"dt": 0.03, "control_rate": 25.0}) == pytest.approx(0.04)
+    # a value that is no number: the same one-line error as 0 (a traceback, exit 1, before)
+    from horizon_mpc.closed_loop import SettingError
+
+    for given in ({"dt": "abc"}, {"control_rate": [50]}, {"control_rate": True},
+                  {"dt": 0.0}):
+        with pytest.raises(SettingError, match="must be a finite number > 0"):
+            control_period("go2", given)
 
 
 def test_the_lockstep_loop_steps_at_the_nodes_control_rate():
