@@ -470,7 +470,7 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
     spared = {str(p) for p in keep} | set(_LOADED)
     now, deleted = time.time(), []
     for mtime, size, lib in libs:
-        if total <= max_bytes:
+        if total <= max_bytes and max_bytes > 0:  # 0 (clear): empty files go too
             break
         if str(lib) in spared or now - mtime < spare_s:
             continue

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 
@@ -26,6 +27,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="prune: the bound in MB, > 0 (default $HORIZON_MPC_CACHE_MAX_MB "
                         f"or {codegen.DEFAULT_CACHE_MAX_MB:g}); `clear` empties the cache")
     args = parser.parse_args(argv)
+    if args.max_mb is not None and args.command != "prune":
+        parser.error(f"--max-mb is the bound of `prune`; `{args.command}` takes none")
+    if args.dir is not None and not os.path.isdir(args.dir):
+        parser.error(f"--dir {args.dir}: no such folder")
     if args.max_mb is not None and not (0 < args.max_mb < math.inf):
         parser.error(f"--max-mb must be a number of MB > 0, got {args.max_mb:g} (`clear` "
                      "empties the cache; HORIZON_MPC_CACHE_MAX_MB=0 leaves it unbounded)")

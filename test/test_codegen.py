@@ -386,6 +386,23 @@ def test_cache_command_line_reports_prunes_and_clears(cache):
         bad = subprocess.run([*cmd, "prune", "--max-mb", bound], env=env, capture_output=True,
                              text=True, timeout=120)
         assert bad.returncode == 2 and "--max-mb" in bad.stderr, bound
+    # options that did nothing, accepted without a word
+    for args, text in ((["clear", "--max-mb", "5"], "--max-mb is the bound of `prune`"),
+                       (["info", "--max-mb", "5"], "--max-mb is the bound of `prune`"),
+                       (["info", "--dir", str(cache / "missing")], "no such folder")):
+        bad = subprocess.run([*cmd, *args], env=env, capture_output=True, text=True,
+                             timeout=120)
+        assert bad.returncode == 2 and text in bad.stderr, args
+
+
+def test_clear_empties_the_cache_empty_files_included(cache):
+    """A zero-byte library (an interrupted copy) survived `clear`: the loop stopped once
+    the total was 0."""
+    _fake_libraries(cache, {"a": 9000})
+    _fake_libraries(cache, {"empty": 9000}, size=0)
+    removed = codegen.prune_cache(cache, max_bytes=0, spare_s=0.0)
+    assert sorted(p.name for p in removed) == ["a.so", "empty.so"]
+    assert list(cache.glob("*.so")) == []
 
 
 def test_cache_command_line_says_what_it_spared_or_that_there_is_no_bound(cache):
