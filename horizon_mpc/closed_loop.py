@@ -681,10 +681,6 @@ def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, li
     out = Path(args.out)
     if out.exists() and not out.is_dir():  # found after the run, the run was lost
         raise ValueError(f"--out {out} exists and is not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"--out {out}: cannot make that folder ({exc.strerror})") from None
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be a finite number of seconds > 0, got "
                          f"{args.duration}")
@@ -714,6 +710,10 @@ def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, li
             params[name] = yaml.safe_load(value)
         except yaml.YAMLError as exc:
             raise ValueError(f"-p {name}: {value!r} is not a YAML value ({exc})") from None
+    try:  # last: a refused command line leaves no folder behind
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out {out}: cannot make that folder ({exc.strerror})") from None
     return segments, pushes, params
 
 

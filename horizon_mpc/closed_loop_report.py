@@ -176,7 +176,9 @@ def render_replay(robot: str, t: Sequence[float], q: Sequence[np.ndarray],
 
 
 def write_report(rec: Recording, summary: dict, out: str | Path) -> list[Path]:
-    """Write summary.json, the PNG plots and (if frames were rendered) run.gif into ``out``."""
+    """Write summary.json, the PNG plots, (if frames were rendered) run.gif and (real time)
+    mpc_node.log into ``out``; an earlier run's run.gif or mpc_node.log there is removed
+    when this run has none."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -253,6 +255,10 @@ def write_report(rec: Recording, summary: dict, out: str | Path) -> list[Path]:
         from horizon_mpc.sim.render import write_gif
 
         written.append(write_gif(out / "run.gif", rec.frames, fps=1.0 / FRAME_PERIOD))
+    # an earlier run's GIF or node log in the same folder would pass for this run's
+    for stale in (out / "run.gif", out / "mpc_node.log"):
+        if stale not in written:
+            stale.unlink(missing_ok=True)
     return written
 
 

@@ -134,6 +134,14 @@ def test_the_cli_refuses_what_cannot_run_in_one_line_with_code_2(tmp_path, caplo
     assert any(match in r.getMessage() for r in caplog.records), caplog.text
 
 
+def test_a_refused_command_line_leaves_no_output_folder(tmp_path):
+    from horizon_mpc.closed_loop import main
+
+    out = tmp_path / "deep" / "out"
+    assert main(["--duration", "-1", "--out", str(out), "--no-gif"]) == 2
+    assert not (tmp_path / "deep").exists()  # it was made before the arguments were checked
+
+
 def test_an_out_that_is_not_a_folder_is_refused_before_the_run(tmp_path, caplog):
     """It was found when the report was written, after the run: a traceback, the run lost."""
     from horizon_mpc.closed_loop import main
@@ -514,6 +522,24 @@ def test_realtime_mode_runs_the_mpc_in_a_second_process(realtime_run):
     assert child["cpu_s"] > 0.1 * summary["sim_time"]
     assert "bootstrapped" in rec.mpc_log  # its output is kept
     assert summary["domain_id"] == child["domain_id"] and summary["foreign_publishers"] == []
+
+
+@pytest.mark.slow
+def test_a_report_without_a_gif_or_a_log_removes_an_earlier_runs(realtime_run, tmp_path):
+    """A --no-gif (or lockstep) run into the folder of an earlier real-time run with a GIF
+    left that run's run.gif and mpc_node.log beside its own summary."""
+    import copy
+    import shutil
+
+    rec, summary, written = realtime_run
+    out = tmp_path / "reused"
+    shutil.copytree(written[0].parent, out)
+    assert (out / "run.gif").exists() and (out / "mpc_node.log").exists()
+    lean = copy.copy(rec)
+    lean.frames, lean.mpc_log = [], ""
+    files = write_report(lean, summary, out)
+    assert not (out / "run.gif").exists() and not (out / "mpc_node.log").exists()
+    assert all(p.exists() for p in files)
 
 
 @pytest.mark.slow

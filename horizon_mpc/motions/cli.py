@@ -122,14 +122,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     solver_time = res.stats.get("time")
     inner = (f" (the solver's own {solver_time:.1f} s, the rest building the problem)"
              if isinstance(solver_time, float) and solver_time < wall else "")
-    print(f"{args.motion}: {'solved' if ok else 'NOT solved'} in {wall:.1f} s{inner}; "
+    # a failure says why (the solver's status, also in summary.json)
+    status = "" if ok else f" ({solver} status: {res.stats.get('status', 'unknown')})"
+    print(f"{args.motion}: {'solved' if ok else 'NOT solved'}{status} in {wall:.1f} s{inner}; "
           f"outputs in {out}: {', '.join(p.name for p in files.values())}")
     for key, value in res.summary.items():
         if not isinstance(value, list) or len(value) <= 4:
             print(f"  {key}: {value}")
     if "pybullet_replay" in extra:
         print(f"  pybullet_replay: {extra['pybullet_replay']}")
-        if not extra["pybullet_replay"]["within_tolerance"]:
+        if not ok:
+            print("  (the replay is of a plan the solver did not solve: no guide to how a "
+                  "solved leap lands)")
+        elif not extra["pybullet_replay"]["within_tolerance"]:
             print(f"  WARNING: replayed open loop in PyBullet (joint PD on the plan), the leap "
                   f"lands {extra['pybullet_replay']['landing_error']:.3f} m from its target "
                   f"(> {REPLAY_TOLERANCE} m): the plan is not one this simulated robot "
