@@ -407,6 +407,16 @@ def control_period(robot: str, mpc_parameters: Mapping[str, object] | None = Non
     return 1.0 / value if name == "control_rate" else value
 
 
+def _process_figures(child: MpcProcess, cpu0: tuple[float, float]) -> dict:
+    """The MPC process's pid, domain, memory and CPU seconds since ``cpu0`` (this process's,
+    the child's), and this process's CPU and memory: ``Recording.mpc_process``."""
+    return {"pid": child.pid, "domain_id": child.domain_id,
+            "memory_mb": process_memory_mb(child.pid),
+            "cpu_s": process_cpu_seconds(child.pid) - cpu0[1],
+            "sim_process_cpu_s": time.process_time() - cpu0[0],
+            "sim_process_memory_mb": process_memory_mb(os.getpid())}
+
+
 def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: int | None,
                   mpc_parameters: Mapping[str, object] | None,
                   mpc_command: Sequence[str] | None, ready_timeout: float) -> Recording:
@@ -446,16 +456,12 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
                                                loop, lambda: _foreign_publishers(player, rec))
             except KeyboardInterrupt:  # the figures of the run so far
                 rec.wall_time = time.perf_counter() - wall0
+                rec.mpc_process = _process_figures(child, cpu0)  # it was left {} here
                 _copy_ticks(monitor.record, rec)
                 rec.mpc_log = child.log_tail(lines=200)
                 raise
             _final_isolation_check(player, rec, t_player)
-            rec.mpc_process = {
-                "pid": child.pid, "domain_id": child.domain_id,
-                "memory_mb": process_memory_mb(child.pid),
-                "cpu_s": process_cpu_seconds(child.pid) - cpu0[1],
-                "sim_process_cpu_s": time.process_time() - cpu0[0],
-                "sim_process_memory_mb": process_memory_mb(os.getpid())}
+            rec.mpc_process = _process_figures(child, cpu0)
             _copy_ticks(monitor.record, rec)
             executor.shutdown()
             for node in (player, monitor, sim):

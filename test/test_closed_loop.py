@@ -710,3 +710,26 @@ def test_an_interrupted_run_writes_what_it_has_and_exits_130(tmp_path, monkeypat
     assert summary["interrupted"] is True and 0.55 <= summary["sim_time"] <= 0.65
     assert summary["ticks_per_sim_second"] > 45 and summary["wall_time"] > 0  # kept
     assert "interrupted at t = 0.58 s" in caplog.text
+
+
+@pytest.mark.slow
+def test_an_interrupted_realtime_run_keeps_the_mpc_process_figures(tmp_path, monkeypatch):
+    """The child's pid, memory and CPU were lost ("mpc_process": {}) when Ctrl-C came."""
+    from horizon_mpc import closed_loop
+
+    period = closed_loop._Loop.period
+
+    def interrupting(loop, sim, t, *args, **kwargs):
+        if t >= 0.6:
+            raise KeyboardInterrupt
+        return period(loop, sim, t, *args, **kwargs)
+
+    monkeypatch.setattr(closed_loop._Loop, "period", interrupting)
+    out = tmp_path / "out"
+    assert closed_loop.main(["--out", str(out), "--no-gif", "--duration", "2", "--mode",
+                             "realtime"]) == 130
+    summary = json.loads((out / "summary.json").read_text())
+    child = summary["mpc_process"]
+    assert summary["interrupted"] is True
+    assert child["pid"] != os.getpid() and child["memory_mb"]["peak"] > 50
+    assert child["cpu_s"] > 0.0 and not process_exists(child["pid"])
