@@ -396,12 +396,10 @@ def control_period(robot: str, mpc_parameters: Mapping[str, object] | None = Non
     given = dict(mpc_parameters or {})
     name = "control_rate" if "control_rate" in given else "dt"
     raw = given.get(name, MpcSettings.from_dict(load_robot_config(robot).section("mpc")).dt)
-    try:
-        value = float(raw)  # a YAML number; a bool or a list is no rate
-        ok = not isinstance(raw, bool)
-    except (TypeError, ValueError):
-        ok = False
-    if not (ok and math.isfinite(value) and value > 0.0):
+    # a YAML number; a text, a list or a bool is no rate
+    value = float(raw) if isinstance(raw, (int, float)) and not isinstance(raw, bool) else (
+        math.nan)
+    if not (math.isfinite(value) and value > 0.0):
         # the node refuses it too; here first, before dividing by it
         raise SettingError(f"{name} must be a finite number > 0, got {given[name]!r}")
     return 1.0 / value if name == "control_rate" else value

@@ -690,19 +690,26 @@ def test_the_lockstep_loop_steps_at_the_nodes_control_rate():
     assert rec.prepare_misses == 0  # each tick on the state it prepared for
 
 
-def test_an_interrupted_run_writes_what_it_has_and_exits_130(tmp_path, monkeypatch, caplog):
-    """Ctrl-C (or SIGTERM, which the CLI turns into the same) printed a traceback and left
-    an empty output folder."""
+def _interrupt_the_loop_at(monkeypatch, t_stop: float) -> None:
+    """Ctrl-C in the closed loop's first control period at or after ``t_stop`` (sim s)."""
     from horizon_mpc import closed_loop
 
     period = closed_loop._Loop.period
 
     def interrupting(loop, sim, t, *args, **kwargs):
-        if t >= 0.6:
+        if t >= t_stop:
             raise KeyboardInterrupt
         return period(loop, sim, t, *args, **kwargs)
 
     monkeypatch.setattr(closed_loop._Loop, "period", interrupting)
+
+
+def test_an_interrupted_run_writes_what_it_has_and_exits_130(tmp_path, monkeypatch, caplog):
+    """Ctrl-C (or SIGTERM, which the CLI turns into the same) printed a traceback and left
+    an empty output folder."""
+    from horizon_mpc import closed_loop
+
+    _interrupt_the_loop_at(monkeypatch, 0.6)
     out = tmp_path / "out"
     with caplog.at_level("WARNING"):
         assert closed_loop.main(["--out", str(out), "--no-gif", "--duration", "2"]) == 130
@@ -717,14 +724,7 @@ def test_an_interrupted_realtime_run_keeps_the_mpc_process_figures(tmp_path, mon
     """The child's pid, memory and CPU were lost ("mpc_process": {}) when Ctrl-C came."""
     from horizon_mpc import closed_loop
 
-    period = closed_loop._Loop.period
-
-    def interrupting(loop, sim, t, *args, **kwargs):
-        if t >= 0.6:
-            raise KeyboardInterrupt
-        return period(loop, sim, t, *args, **kwargs)
-
-    monkeypatch.setattr(closed_loop._Loop, "period", interrupting)
+    _interrupt_the_loop_at(monkeypatch, 0.6)
     out = tmp_path / "out"
     assert closed_loop.main(["--out", str(out), "--no-gif", "--duration", "2", "--mode",
                              "realtime"]) == 130

@@ -294,8 +294,9 @@ class MpcParameters:
             for note in gait_warnings(g.name, g.step_duration, g.duty_factor):
                 self.get_logger().warning(note)
         changed = [n[2:] for n in new if n.startswith("w_")]
-        for note in weight_warnings(st.weights, changed) if changed else []:
-            self.get_logger().warning(note)
+        if changed:
+            for note in weight_warnings(st.weights, changed):
+                self.get_logger().warning(note)
         return SetParametersResult(successful=True)
 
 
