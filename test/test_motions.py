@@ -637,3 +637,13 @@ def test_the_walk_with_a_gait_that_never_lifts_a_foot_is_summarised(tmp_path):
     summary = json.loads((out / "summary.json").read_text())["results"]
     assert summary["gait_period"] == "inf" and summary["window"] == [0.0, 1.0]
     assert "force_periodicity" not in summary and summary["swing_apex"] is None
+
+
+def test_verbose_prints_the_solvers_iterations_as_they_go(tmp_path, capsys):
+    """`-v` was debug logging only: a GN-SQP turn ran minutes without a line."""
+    from horizon_mpc.motions.cli import main
+
+    assert main(["walk", "--set", "duration=0.06", "--no-animation", "-v",
+                 "--out", str(tmp_path)]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("ilqr: ")]
+    assert len(lines) > 3, lines  # the first horizon's iterations, then the ticks'

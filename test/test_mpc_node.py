@@ -947,6 +947,31 @@ def test_a_timer_tick_plans_from_the_state_of_the_prepared_time_when_it_came(con
         node.destroy_node()
 
 
+def test_lockstep_states_at_another_period_than_the_nodes_are_explained(context,
+                                                                        walking_mpc):
+    """A hand-started lockstep simulator stepping 10 ms (sim_node's default until session
+    24) against the node's 20 ms: every tick ran whole, the go2 fell, and the warning
+    blamed a loaded machine or control_rate. It names the states' spacing and the fix."""
+    node = sim_time_node(context, walking_mpc, prepare_ahead=True)
+    warnings: list[str] = []
+    node._warn = lambda kind, text: warnings.append(text)
+    try:
+        node._pub_traj, node._pub_path, node._pub_diag = Sent(), Sent(), Sent()
+        _, q = standing_configuration(node.mpc.cfg)
+        start, period = 10 * NS_PER_S, 10_000_000
+        for k in range(20):
+            _feed_state(node, start + k * period, q)  # trigger 'state': a tick each
+        assert node.ticks == 20 and node.mpc.prepare_misses >= 18
+        misses = [w for w in warnings if "ran a whole tick" in w]
+        assert misses, warnings
+        assert "the states come 10 ms apart" in misses[-1]
+        assert "one control period (20 ms" in misses[-1]
+        assert "sim_node's control_period" in misses[-1]
+    finally:
+        walking_mpc.settings.prepare_ahead = False  # the fixture is shared
+        node.destroy_node()
+
+
 def test_a_drivers_states_off_the_tick_times_get_the_prepared_feedback_steps(context,
                                                                                walking_mpc):
     """A robot's driver stamps its states when it measures them (500 Hz, jittered), never
@@ -1397,6 +1422,25 @@ def test_params_file_sections_that_match_no_node_are_named(tmp_path):
                                           "/mpc") == []  # unreadable: rcl's to report
 
 
+def test_node_targeted_parameter_rules_that_match_no_node_are_named():
+    """`-r __node:=other -p mpc:gait:=walk`: rcl applies the rule to a node 'mpc' only and
+    the gait stayed trot without a word (a params-file section was already named)."""
+    from horizon_mpc.nodes.spin import unmatched_parameter_rules
+
+    argv = ["mpc_node", "--ros-args", "-r", "__node:=other", "-p", "mpc:gait:=walk",
+            "-p", "other:max_vx:=0.4", "-p", "dt:=0.02", "--param", "/r1/mpc:n_nodes:=20",
+            "-p", "/**:use_sim_time:=false", "-p", "w:=a:b"]
+    notes = unmatched_parameter_rules(argv, "/other")
+    assert len(notes) == 2, notes
+    assert "-p mpc:gait:=walk: for the node 'mpc', and this node is /other" in notes[0]
+    assert "'gait' is not applied" in notes[0] and "'/r1/mpc'" in notes[1]
+    # namespaced: 'mpc:' is /mpc for rcl, not /r1/mpc
+    assert [n.split(":")[0] for n in unmatched_parameter_rules(argv, "/r1/mpc")] == [
+        "-p mpc", "-p other"]
+    # outside --ros-args a -p is no rule of rcl's (named as a stray argument elsewhere)
+    assert unmatched_parameter_rules(["mpc_node", "-p", "mpc:gait:=walk"], "/x") == []
+
+
 def test_state_reliability_best_effort_hears_a_sensor_data_publisher(context, walking_mpc):
     """A driver publishing joint_states/odom with the sensor-data QoS (best effort) never
     reaches a reliable subscription: with state_reliability best_effort it does."""
@@ -1445,17 +1489,22 @@ def test_a_duty_factor_below_the_minimum_is_refused_at_start_up_too(context, wal
 
 def test_a_stopped_simulator_is_reported_on_the_wall_clock(context, walking_mpc):
     """sim_node is also the clock: when it stops, sim time stops and no timer tick can see
-    the states age; the steady-clock watchdog says so (the node went silent before)."""
-    node = sim_time_node(context, walking_mpc, diagnostics_rate=0.0)
+    the states age; the steady-clock watchdog says so (the node went silent before), in
+    the log and on /diagnostics at every look (at the default 10 Hz rate, counted on the
+    stopped clock, one WARN went out and then nothing: a viewer started later saw none)."""
+    node = sim_time_node(context, walking_mpc)
     try:
         drive_in_sim_time(node, 3)
         skips = node.stale_skips
         node._check_progress()  # states came since the last look: nothing to say
         assert node.stale_skips == skips
-        node._check_progress()  # none since: stale
-        assert node.stale_skips == skips + 1
-        status = node._pub_diag.msgs[-1].status[0]
-        assert status.level == DiagnosticStatus.WARN and "stale" in status.message
+        for look in range(1, 4):  # none since: stale, each look
+            sent = len(node._pub_diag.msgs)
+            node._check_progress()
+            assert node.stale_skips == skips + look
+            assert len(node._pub_diag.msgs) == sent + 1
+            status = node._pub_diag.msgs[-1].status[0]
+            assert status.level == DiagnosticStatus.WARN and "stale" in status.message
     finally:
         node.destroy_node()
 
@@ -1466,3 +1515,77 @@ def test_use_sim_time_outside_ros_args_is_no_parameter(walking_mpc):
     for args, expected in ((["mpc_node", "-p", "use_sim_time:=false"], True),
                            (["mpc_node", "--ros-args", "-p", "use_sim_time:=false"], False)):
         assert _use_sim_time(walking_mpc, args) is expected, args
+
+
+class _Logger:
+    """Stands in for a node's logger: keeps the warnings."""
+
+    def __init__(self) -> None:
+        self.warnings: list[str] = []
+
+    def warning(self, text: str) -> None:
+        self.warnings.append(text)
+
+    def info(self, text: str) -> None:
+        pass
+
+
+def test_a_publishers_fixed_layout_is_said_once_repairs_stay_throttled(context, walking_mpc,
+                                                                      monkeypatch):
+    """A robot with a gripper sends two joints the model lacks in every JointState: the
+    note came every 2 s for as long as it ran (844 suppressed in a reviewer's run). Said
+    once; so is an odometry child frame that is not the base link (its twist is taken as
+    the base's), while the base link and an empty one are not."""
+    node = sim_time_node(context, walking_mpc)
+    log = _Logger()
+    monkeypatch.setattr(node, "get_logger", lambda: log)
+    try:
+        _, q = standing_configuration(walking_mpc.cfg)
+        zeros = np.zeros(3)
+        for k in range(3):
+            stamp = time_from_ns(10 * NS_PER_S + k * 20_000_000)
+            msg = joint_state_to_msg(stamp, [*node.joint_names, "gripper_finger"],
+                                     np.append(q[7:], 0.0), np.zeros(len(q) - 6))
+            node._on_joint_state(msg)
+            for child in ("imu_link", "base", ""):
+                odom = odometry_to_msg(stamp, q[:3], q[3:7], zeros, zeros)
+                odom.child_frame_id = child
+                node._on_odom(odom)
+            node._last_warn.clear()  # as if the throttle period had passed
+        extra = [w for w in log.warnings if "gripper_finger" in w]
+        frames = [w for w in log.warnings if "child_frame_id" in w]
+        assert len(extra) == 1 and "said once" in extra[0], log.warnings
+        assert len(frames) == 1 and "'imu_link'" in frames[0] and "base" in frames[0]
+    finally:
+        node.destroy_node()
+
+
+def test_a_publisher_of_another_type_on_an_input_is_named(context, walking_mpc, monkeypatch):
+    """A TwistStamped on cmd_vel (Jazzy's teleop and nav2 can send those) never connects
+    to the node's Twist subscription: the robot stood and nothing said why."""
+    from geometry_msgs.msg import TwistStamped
+
+    node = sim_time_node(context, walking_mpc)
+    log = _Logger()
+    monkeypatch.setattr(node, "get_logger", lambda: log)
+    # a process of its own, as a teleop is (one DDS participant refuses a second type on
+    # a topic outright)
+    other = rclpy.Context()
+    rclpy.init(context=other)
+    teleop = Node("teleop", context=other)
+    try:
+        teleop.create_publisher(TwistStamped, "cmd_vel", 10)
+        end = time.monotonic() + 5.0
+        while time.monotonic() < end and not log.warnings:
+            node._check_input_types()
+            time.sleep(0.05)
+        for _ in range(3):
+            node._check_input_types()
+        assert len(log.warnings) == 1, log.warnings
+        assert "/cmd_vel: " in log.warnings[0]  # the node's name, if discovered by then
+        assert (" publishes geometry_msgs/msg/TwistStamped, this node subscribes "
+                "geometry_msgs/msg/Twist") in log.warnings[0]
+    finally:
+        teleop.destroy_node()
+        rclpy.try_shutdown(context=other)
+        node.destroy_node()

@@ -158,6 +158,12 @@ class RobotModel(SymbolicFunctions):
         return cls.from_urdf(cfg.urdf_path) if cfg.urdf_path else cls.from_example(cfg.robot)
 
     # ------------------------------------------------------------------ information
+    @property
+    def root_link(self) -> str:
+        """The URDF's root link (the body the free-flyer or the fixed base carries)."""
+        return next(f.name for f in self.pin_model.frames
+                    if f.type == pin.FrameType.BODY and f.parentJoint <= 1)
+
     def neutral(self) -> np.ndarray:
         """Neutral configuration (nq,): base at origin, identity quaternion, joints at 0."""
         return liegroup.neutral(self._specs, self.nq)

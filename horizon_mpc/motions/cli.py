@@ -41,7 +41,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-animation", action="store_true", help="skip the GIF")
     p.add_argument("--no-replay", action="store_true",
                    help="leap: skip the open-loop PyBullet replay")
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging and the solver's iterations as they go")
     return p
 
 
@@ -97,7 +97,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"{args.motion}: {cfg.name} ({model.nv} dof), solver {solver}")
     t0 = time.perf_counter()
     try:
-        res = run(cfg, solver, settings, model=model)
+        # -v: the solver's iterations as they go (a GN-SQP turn takes minutes)
+        res = run(cfg, solver, settings, opts={"verbose": True} if args.verbose else None,
+                  model=model)
     except ValueError as exc:  # settings the problem cannot be built with (n_nodes 0, ...)
         print(f"motion: error: cannot build the {args.motion}: {exc}", file=sys.stderr)
         return 2

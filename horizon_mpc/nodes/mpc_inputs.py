@@ -24,6 +24,7 @@ __all__ = [
     "ABSURD_COMMAND",
     "JOINT_LIMIT_MARGIN",
     "QUATERNION_TOLERANCE",
+    "LayoutNote",
     "base_from_odometry",
     "command_from_twist",
     "joints_from_joint_state",
@@ -74,6 +75,13 @@ def command_from_twist(
     return np.array(cmd), notes
 
 
+class LayoutNote(str):
+    """A note on how a publisher lays out its messages (joints the model does not have),
+    the same in every message: worth saying once, not every few seconds."""
+
+    __slots__ = ()
+
+
 @lru_cache(maxsize=16)
 def _name_match(names: tuple[str, ...], joint_names: tuple[str, ...]) -> tuple[
         np.ndarray, list[str]]:
@@ -98,7 +106,7 @@ def _name_match(names: tuple[str, ...], joint_names: tuple[str, ...]) -> tuple[
     notes = []
     extra = sorted(set(names) - set(joint_names))
     if extra:
-        notes.append(f"JointState joints {extra} are not in the model; ignored")
+        notes.append(LayoutNote(f"JointState joints {extra} are not in the model; ignored"))
     idx = np.array([index[n] for n in joint_names], dtype=int)
     idx.flags.writeable = False  # shared by every call with these names
     return idx, notes

@@ -39,6 +39,7 @@ from horizon_mpc.mpc.controller import Plan, WalkingMpc
 from horizon_mpc.nodes.conversions import NS_PER_S, time_to_ns
 from horizon_mpc.nodes.declare import parameter_overrides
 from horizon_mpc.nodes.mpc_inputs import (
+    LayoutNote,
     base_from_odometry,
     command_from_twist,
     joints_from_joint_state,
@@ -220,6 +221,10 @@ class MpcNode(MpcParameters, Node):
         self.last_state_age = math.nan
         self._last_warn: dict[str, float] = {}
         self._suppressed: dict[str, int] = {}
+        self._said_once: set[str] = set()
+        # odometry twists are in child_frame_id (REP 105): the base link's, or its root
+        # body's when the config names a link fixed to it (a1: trunk on base)
+        self._base_frames = {mpc.cfg.base_link, mpc.model.root_link}
 
         self._pub_traj = self.create_publisher(JointTrajectory, "joint_trajectory", 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -228,9 +233,11 @@ class MpcNode(MpcParameters, Node):
         state_qos = QoSProfile(depth=1, reliability=(
             ReliabilityPolicy.BEST_EFFORT if self._p("state_reliability") == "best_effort"
             else ReliabilityPolicy.RELIABLE))
-        self.create_subscription(JointState, "joint_states", self._on_joint_state, state_qos)
-        self.create_subscription(Odometry, "odom", self._on_odom, state_qos)
-        self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10)
+        self._inputs = (
+            self.create_subscription(JointState, "joint_states", self._on_joint_state,
+                                     state_qos),
+            self.create_subscription(Odometry, "odom", self._on_odom, state_qos),
+            self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if self.trigger == "timer":
             self._timer = self.create_timer(self.period, self.tick)
@@ -266,20 +273,34 @@ class MpcNode(MpcParameters, Node):
         self._last_warn[kind] = wall
         self.get_logger().warning(text + (f" ({n} similar warnings suppressed)" if n else ""))
 
+    def _warn_once(self, text: str, key: str | None = None) -> None:
+        """A warning said once per distinct ``key`` (default: the text)."""
+        key = text if key is None else key
+        if key not in self._said_once:
+            self._said_once.add(key)
+            self.get_logger().warning(text + " (said once)")
+
+    def _note(self, topic: str, note: str) -> None:
+        if isinstance(note, LayoutNote):
+            self._warn_once(note)
+        else:
+            self._warn(_note_kind(topic, note), note)
+
     def _skip_stale(self, age: float, kind: str, text: str, stamp_ns: int,
-                    now_ns: int) -> bool:
+                    now_ns: int, force: bool = False) -> bool:
         """Not planning from a state ``age`` s old (negative: stamped ahead of the clock):
-        counted in ``stale_skips``, warned about (``kind``, throttled), WARN diagnostics.
-        Returns False (no trajectory published)."""
+        counted in ``stale_skips``, warned about (``kind``, throttled), WARN diagnostics
+        (``force``: whatever the node clock says). Returns False (no trajectory published)."""
         self.last_state_age = age
         self.stale_skips += 1
         self._warn(kind, text)
-        self._publish_diagnostics(None, stamp_ns, now_ns)
+        self._publish_diagnostics(None, stamp_ns, now_ns, force=force)
         return False
 
     def _check_progress(self) -> None:
         """Explain (throttled) why states keep arriving while no tick happens, or say that
         they stopped (wall clock: a stopped simulator stops the sim clock as well)."""
+        self._check_input_types()
         ticks, clock_ns = self.ticks + self.stale_skips, self.get_clock().now().nanoseconds
         prev_states, prev_ticks, prev_clock = self._watch
         self._watch = (self._states_in, ticks, clock_ns)
@@ -289,7 +310,7 @@ class MpcNode(MpcParameters, Node):
             self._skip_stale(math.inf, "stale", f"no joint_states / odom for "
                              f"{_WATCH_PERIOD:g} s (wall clock): not planning; the last "
                              "trajectory sent is the robot's last plan",
-                             self._last_tick_stamp or 0, clock_ns)
+                             self._last_tick_stamp or 0, clock_ns, force=True)
             return
         if self._states_in == prev_states or ticks > prev_ticks:
             return
@@ -303,6 +324,22 @@ class MpcNode(MpcParameters, Node):
                        "stamp have arrived, and theirs never match (the last ones "
                        f"{(self._joints[0] - self._base[0]) / 1e6:+.1f} ms apart): with "
                        "separate drivers use trigger:=timer")
+
+    def _check_input_types(self) -> None:
+        """Say (once each) which publishers on an input topic send another message type, a
+        TwistStamped cmd_vel above all (Jazzy's teleop and nav2 can publish those): DDS
+        never connects the two and nothing else says so; the robot just stands."""
+        for sub in self._inputs:
+            ours = message_type_name(sub.msg_type)
+            for info in self.get_publishers_info_by_topic(sub.topic_name):
+                if info.topic_type != ours:
+                    # a publisher's node is named once discovery has caught up
+                    who = ("a node" if "_UNKNOWN_" in info.node_name else
+                           f"{info.node_namespace.rstrip('/')}/{info.node_name}")
+                    self._warn_once(f"{sub.topic_name}: {who} publishes {info.topic_type}, "
+                                    f"this node subscribes {ours}: none of its messages "
+                                    "arrive (different types never connect)",
+                                    key=f"{sub.topic_name} {info.topic_type}")
 
     @property
     def command(self) -> np.ndarray:
@@ -335,7 +372,7 @@ class MpcNode(MpcParameters, Node):
             self._warn("joint_states", f"rejected joint_states: {exc}")
             return
         for note in notes:
-            self._warn(_note_kind("joint_states", note), note)
+            self._note("joint_states", note)
         self._joints_recent.append((time_to_ns(msg.header.stamp), qj, vj))
         self._states_in += 1
         self._maybe_tick_on_state()
@@ -348,7 +385,11 @@ class MpcNode(MpcParameters, Node):
             self._warn("odom", f"rejected odom: {exc}")
             return
         for note in notes:
-            self._warn(_note_kind("odom", note), note)
+            self._note("odom", note)
+        if msg.child_frame_id and msg.child_frame_id not in self._base_frames:
+            self._warn_once(f"odom child_frame_id {msg.child_frame_id!r} is not the base link "
+                            f"({' or '.join(sorted(self._base_frames))}): its twist is taken as "
+                            "the base's (REP 105: the twist is in child_frame_id)")
         self._base_recent.append((time_to_ns(msg.header.stamp), pos, quat, lin, ang))
         self._world_frame = msg.header.frame_id or "odom"
         self._states_in += 1
@@ -369,7 +410,7 @@ class MpcNode(MpcParameters, Node):
             notes.append(f"gait {self.mpc.settings.gait.name!r} never lifts a foot: cmd_vel "
                          "is not followed (the robot stands)")
         for note in notes:
-            self._warn(_note_kind("cmd_vel", note), note)
+            self._note("cmd_vel", note)
         self._cmd = (self.now(), cmd)
         self._cmd_rejected = 0
 
@@ -472,7 +513,7 @@ class MpcNode(MpcParameters, Node):
         q = np.concatenate((pos, quat, qj))
         v = np.concatenate((lin, ang, vj))
         cmd = self.command
-        self._last_tick_stamp = stamp_ns
+        previous_ns, self._last_tick_stamp = self._last_tick_stamp, stamp_ns
         bootstrap = self.plan is None
         wall = time.perf_counter()
         try:
@@ -489,14 +530,7 @@ class MpcNode(MpcParameters, Node):
                 # a late state now and then (a loaded simulator) costs one whole tick and is
                 # counted (diagnostics prepare_misses); warned about when it is the rule
                 if self._recent_misses[-1] and self._misses_are_the_rule():
-                    tol = self.mpc.settings.feedback_tolerance
-                    self._warn("prepare_miss", f"state stamped {t:.4f} s, "
-                               f"{abs(self._prepared_ns - stamp_ns) / 1e6:.3f} ms from the "
-                               f"prepared tick time (feedback_tolerance {tol * 1e3:g} ms): "
-                               f"ran a whole tick ({self._misses_text()}): no state comes "
-                               "near the tick times (a loaded machine delays them, "
-                               "control_rate is not their rate, or their stamps are further "
-                               "apart than feedback_tolerance)")
+                    self._warn("prepare_miss", self._miss_text(t, stamp_ns, previous_ns))
         except Exception as exc:  # noqa: BLE001 - the node must outlive any solver error
             self.solver_errors += 1
             self._warn("solver", f"MPC tick failed ({type(exc).__name__}: {exc}); "
@@ -537,6 +571,25 @@ class MpcNode(MpcParameters, Node):
     def _misses_text(self) -> str:
         return f"{sum(self._recent_misses)} of the last {len(self._recent_misses)} ticks"
 
+    def _miss_text(self, t: float, stamp_ns: int, previous_ns: int | None) -> str:
+        """The warning of prepare misses that are the rule, with their likely cause."""
+        tol = self.mpc.settings.feedback_tolerance
+        text = (f"state stamped {t:.4f} s, {abs(self._prepared_ns - stamp_ns) / 1e6:.3f} ms "
+                f"from the prepared tick time (feedback_tolerance {tol * 1e3:g} ms): ran a "
+                f"whole tick ({self._misses_text()}): ")
+        if self.trigger == "state":
+            # a lockstep simulator stepping at another period than the node's
+            spacing = "" if previous_ns is None else (
+                f"the states come {(stamp_ns - previous_ns) / 1e6:g} ms apart, ")
+            return text + (f"trigger 'state' ticks on every state, {spacing}and the "
+                           f"preparation is for one control period ({self.period * 1e3:g} ms, "
+                           "1 / control_rate) later: make them equal (sim_node's "
+                           "control_period), a whole number of dt "
+                           f"({self.mpc.settings.dt:g} s)")
+        return text + ("no state comes near the tick times (a loaded machine delays them, "
+                       "control_rate is not their rate, or their stamps are further apart "
+                       "than feedback_tolerance)")
+
     # ------------------------------------------------------------------ outputs
     def trajectory_msg(self, plan: Plan, stamp_ns: int) -> JointTrajectory:
         """The first ``publish_points`` nodes of ``plan`` (joints in model order); efforts
@@ -560,8 +613,10 @@ class MpcNode(MpcParameters, Node):
         return ((t - sch.t_start) / period) % 1.0
 
     def _publish_diagnostics(self, plan: Plan | None, stamp_ns: int,
-                             now_ns: int | None = None) -> None:
-        """The node's status, when ``diagnostics_rate`` says so or its level rose."""
+                             now_ns: int | None = None, force: bool = False) -> None:
+        """The node's status, when ``diagnostics_rate`` says so, its level rose or ``force``
+        (the wall-clock watchdog: a stopped simulator stops the node clock the rate is
+        counted on, and the stale status went out once, then never again)."""
         if plan is None:
             age = "stale" if self.last_state_age > 0 else "future-stamped"
             level, message, stats = DiagnosticStatus.WARN, f"{age} state: not planning", {}
@@ -589,8 +644,8 @@ class MpcNode(MpcParameters, Node):
             self._solve_time_max = max(self._solve_time_max, self.last_solve_time)
         now_ns = self.get_clock().now().nanoseconds if now_ns is None else now_ns
         last = self._last_diag  # a rising level (OK -> WARN) goes out at once
-        if last is not None and level <= last[1] and not due(last[0], self._diag_period_ns,
-                                                               now_ns):
+        if not force and last is not None and level <= last[1] and not due(
+                last[0], self._diag_period_ns, now_ns):
             return
         self._last_diag = (now_ns, level)
         values = {
@@ -614,6 +669,11 @@ class MpcNode(MpcParameters, Node):
         }
         self._solve_time_max = 0.0
         self._pub_diag.publish(self._diag.filled(stamp_ns, level, message, values))
+
+
+def message_type_name(msg_type: type) -> str:
+    """The ROS name of a message class, as the graph gives it: ``geometry_msgs/msg/Twist``."""
+    return f"{msg_type.__module__.split('.')[0]}/msg/{msg_type.__name__}"
 
 
 def _note_kind(topic: str, note: str) -> str:

@@ -22,7 +22,8 @@ import os
 import random
 import textwrap
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
@@ -35,7 +36,8 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from horizon_mpc.config import load_robot_config
+from horizon_mpc.config import RobotConfig, load_robot_config
+from horizon_mpc.locomotion.settings import MpcSettings
 from horizon_mpc.nodes.conversions import (
     NS_PER_S,
     joint_state_to_msg,
@@ -62,14 +64,30 @@ _FREE_RUN_SLICE = 0.002  # s (wall) of stepping per callback when running as fas
 LOCKSTEP_DELAYS = ("lockstep_latency", "lockstep_latency_jitter", "lockstep_state_offset")
 
 
-#: sim_node's parameters: (name, default or an unset type, description[, range])
+@dataclass(frozen=True)
+class FromConfig:
+    """A parameter default read from the robot config (``what`` names it in --help)."""
+
+    what: str
+    read: Callable[[RobotConfig], float]
+
+
+def mpc_period(cfg: RobotConfig) -> float:
+    """The MPC node's default control period (s) for ``cfg``: its ``mpc.dt`` (the node
+    ticks every dt unless given a control_rate)."""
+    return float(cfg.section("mpc").get("dt", MpcSettings.dt))
+
+
+#: sim_node's parameters: (name, default, description[, range]); a :class:`FromConfig`
+#: default is the robot config's value
 SIM_PARAMETERS = [
     ("robot", "go2", "robot config name (config/<robot>.yaml)"),
     ("config", "", "path of a robot config YAML (overrides 'robot')"),
     ("urdf_path", "", "URDF to simulate instead of the config's"),
     ("robot_description", "", "URDF XML text to simulate, as robot_state_publisher's "
      "parameter (overrides urdf_path)"),
-    ("physics_rate", 1000.0, "physics steps per sim second (Hz)",
+    ("physics_rate", FromConfig("sim.physics_rate", lambda cfg: cfg.sim.physics_rate),
+     "physics steps per sim second (Hz)",
      float_range(50, 20000)),
     ("state_rate", 500.0, "joint_states/odom/clock publish rate (Hz, sim time)",
      float_range(1, 20000)),
@@ -80,8 +98,10 @@ SIM_PARAMETERS = [
     ("lockstep_timeout", 1.0,
      "wall seconds to wait for the answer to a state; 0 = wait forever",
      float_range(0, 3600)),
-    ("control_period", 0.01, "sim seconds advanced per lockstep step",
-     float_range(1e-4, 10)),
+    ("control_period", FromConfig("mpc.dt", mpc_period),
+     "sim seconds advanced per lockstep step: the MPC's control period (with trigger "
+     "'state' it ticks on every state; a period that is not a whole number of its dt "
+     "makes the robot fall)", float_range(1e-4, 10)),
     ("lockstep_latency", 0.0,
      "lockstep: sim s from an answer's stamp until it takes effect (the previous "
      "command runs meanwhile): a real-time loop's plan delay", float_range(0, 10)),
@@ -94,13 +114,12 @@ SIM_PARAMETERS = [
      "times k control_period (a state sampled before a timer tick); an answer "
      "stamped up to this much after the state also releases the step",
      float_range(0, 10)),
-    ("kp", Parameter.Type.DOUBLE, "joint P gain (N m/rad); unset = config sim.kp",
+    ("kp", FromConfig("sim.kp", lambda cfg: cfg.sim.kp), "joint P gain (N m/rad)",
      float_range(0, 1e6)),
-    ("kd", Parameter.Type.DOUBLE, "joint D gain (N m s/rad); unset = config sim.kd",
+    ("kd", FromConfig("sim.kd", lambda cfg: cfg.sim.kd), "joint D gain (N m s/rad)",
      float_range(0, 1e5)),
-    ("friction", Parameter.Type.DOUBLE,
-     "foot-ground friction coefficient; unset = config sim.lateral_friction",
-     float_range(0, 10)),
+    ("friction", FromConfig("sim.lateral_friction", lambda cfg: cfg.sim.lateral_friction),
+     "foot-ground friction coefficient", float_range(0, 10)),
     ("initial_x", 0.0, "start base x (m)", float_range(-1e3, 1e3)),
     ("initial_y", 0.0, "start base y (m)", float_range(-1e3, 1e3)),
     ("initial_yaw", 0.0, "start base yaw (rad)", float_range(-math.pi, math.pi)),
@@ -128,10 +147,8 @@ class SimNode(Node):
         super().__init__(node_name, parameter_overrides=list(parameter_overrides or []),
                          **kwargs)
         self._keep_system_clock()
-        self._declare_parameters()
+        cfg = self._declare_parameters()
         par = self._param
-        robot = par("config") or par("robot")
-        cfg = load_robot_config(robot)
         physics_rate = par("physics_rate")
         # lockstep with the delays of a real-time loop (doc/simulator.md, Lockstep protocol):
         # physics steps from an answer's stamp until it takes effect (plus a seeded uniform
@@ -246,10 +263,20 @@ class SimNode(Node):
 
         self.add_on_set_parameters_callback(refuse)
 
-    def _declare_parameters(self) -> None:
-        # all read at start-up: read-only, so a live set is refused, not accepted and ignored
+    def _declare_parameters(self) -> RobotConfig:
+        """Declare every parameter (all read at start-up: read-only, so a live set is
+        refused, not accepted and ignored); the robot config, loaded once ``robot`` and
+        ``config`` are, gives the defaults marked :class:`FromConfig` (a value, not an
+        unset type: ``ros2 param get/dump`` fail on a parameter without one)."""
+        cfg: RobotConfig | None = None
         for name, default, description, *rng in SIM_PARAMETERS:
+            if isinstance(default, FromConfig):
+                if cfg is None:
+                    cfg = load_robot_config(self._param("config") or self._param("robot"))
+                default = float(default.read(cfg))
             declare_parameter(self, name, default, description, *rng, read_only=True)
+        assert cfg is not None  # SIM_PARAMETERS has FromConfig defaults
+        return cfg
 
     def _param(self, name: str) -> object:
         try:
@@ -438,7 +465,8 @@ def usage() -> str:
              textwrap.fill("Parameters, all read at start-up (details: doc/simulator.md, "
                            "installed in share/horizon_mpc/doc):", width=92), ""]
     for name, default, description, *_ in SIM_PARAMETERS:
-        shown = "unset" if isinstance(default, Parameter.Type) else repr(default)
+        shown = (f"the robot config's {default.what}" if isinstance(default, FromConfig)
+                 else repr(default))
         lines.append(f"  {name} (default {shown})")
         lines.append(textwrap.fill(description, width=92, initial_indent=" " * 6,
                                    subsequent_indent=" " * 6))

@@ -22,7 +22,8 @@ from rclpy.signals import SignalHandlerOptions
 from horizon_mpc.nodes.declare import parameter_overrides
 
 __all__ = ["forward_library_warnings", "spin_until_signal", "split_arguments",
-           "undeclared_overrides", "unmatched_params_file_sections"]
+           "undeclared_overrides", "unmatched_parameter_rules",
+           "unmatched_params_file_sections"]
 
 
 # what a node's construction raises on bad parameters or files: one line, no traceback
@@ -107,7 +108,9 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
             return 1
         if stop.is_set():  # a signal while the node was being built
             return 0
-        for note in unmatched_params_file_sections(argv, node.get_fully_qualified_name()):
+        fqn = node.get_fully_qualified_name()
+        for note in (*unmatched_params_file_sections(argv, fqn),
+                     *unmatched_parameter_rules(argv, fqn)):
             log.warning(note)
         unknown = undeclared_overrides(node)
         if unknown:
@@ -148,6 +151,22 @@ def unmatched_params_file_sections(argv: Sequence[str], fqn: str) -> list[str]:
         if keys:
             notes.append(f"--params-file {path}: section(s) {keys} match no node here (this "
                          f"node is {fqn}): their parameters are not applied")
+    return notes
+
+
+def unmatched_parameter_rules(argv: Sequence[str], fqn: str) -> list[str]:
+    """Notes on the ``-p node:name:=value`` rules in ``argv``'s ``--ros-args`` whose node
+    matches no node named ``fqn``: rcl ignores them without a word (``-p mpc:gait:=walk``
+    for the node renamed ``-r __node:=other``)."""
+    _, ros = split_arguments(argv)
+    notes = []
+    for flag, rule in itertools.pairwise(ros):
+        if flag not in ("-p", "--param") or ":=" not in rule:
+            continue
+        target, _, name = rule.split(":=", 1)[0].rpartition(":")
+        if target and not _matches(target, fqn):
+            notes.append(f"-p {rule}: for the node {target!r}, and this node is {fqn}: "
+                         f"{name!r} is not applied")
     return notes
 
 
