@@ -614,8 +614,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ParameterException, SettingError) as exc:  # a -p/-s value a node refuses
         log.error("cannot run: %s", exc)
         return 2
-    summary = summarise(rec, segments, mode=args.mode, robot=args.robot)
-    written = write_report(rec, summary, args.out)
+    written: list[Path] = []
+    try:
+        summary = summarise(rec, segments, mode=args.mode, robot=args.robot)
+        write_report(rec, summary, args.out, written)
+    except KeyboardInterrupt:  # after the run: it was a traceback, and no outputs
+        log.error("interrupted while writing the outputs to %s: written %s, the rest not",
+                  args.out, [p.name for p in written])
+        return 130
     age = summary["plan_age_ms"]
     log.info("sim %.2f s in %.1f s wall (real-time factor %.3f); %.1f ticks per sim s, tick "
              "median %.1f ms, plan age median %.1f ms (p95 %.1f); falls: %d",

@@ -175,28 +175,32 @@ def render_replay(robot: str, t: Sequence[float], q: Sequence[np.ndarray],
     return frames
 
 
-def write_report(rec: Recording, summary: dict, out: str | Path) -> list[Path]:
+def write_report(rec: Recording, summary: dict, out: str | Path,
+                 written: list[Path] | None = None) -> list[Path]:
     """Write summary.json, the PNG plots, (if frames were rendered) run.gif and (real time)
     mpc_node.log into ``out``; an earlier run's run.gif or mpc_node.log there is removed
-    when this run has none."""
+    when this run has none. Returns the paths written, appended to ``written`` as they are
+    (an interrupted call leaves the ones it finished there). The summary goes first:
+    matplotlib's import and the plots take seconds, in which a Ctrl-C left no output."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = [] if written is None else written
+    # strict JSON: a figure with no samples (NaN) is null, not the NaN parsers refuse
+    (out / "summary.json").write_text(json.dumps(_finite_or_null(summary), indent=2,
+                                                 allow_nan=False) + "\n", encoding="utf-8")
+    written.append(out / "summary.json")
+    if rec.mpc_log:
+        (out / "mpc_node.log").write_text(rec.mpc_log + "\n", encoding="utf-8")
+        written.append(out / "mpc_node.log")
+    d = rec.arrays()
+    t = d["t"]
+    if len(t) == 0:
+        return written
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    written = [out / "summary.json"]
-    # strict JSON: a figure with no samples (NaN) is null, not the NaN parsers refuse
-    written[0].write_text(json.dumps(_finite_or_null(summary), indent=2, allow_nan=False)
-                          + "\n", encoding="utf-8")
-    if rec.mpc_log:
-        written.append(out / "mpc_node.log")
-        written[-1].write_text(rec.mpc_log + "\n", encoding="utf-8")
-    d = rec.arrays()
-    t = d["t"]
-    if len(t) == 0:
-        return written
     q, v = d["q"], d["v"]
 
     def save(fig, name: str) -> None:

@@ -719,6 +719,28 @@ def test_an_interrupted_run_writes_what_it_has_and_exits_130(tmp_path, monkeypat
     assert "interrupted at t = 0.58 s" in caplog.text
 
 
+def test_a_ctrl_c_while_the_outputs_are_written_keeps_the_summary(tmp_path, monkeypatch,
+                                                                    caplog):
+    """Ctrl-C just after the run, while matplotlib was imported and the plots drawn: a
+    traceback and no output at all (a reviewer's `timeout -s INT`). The summary is written
+    first; the interruption says what was written, exit code 130."""
+    import matplotlib.figure
+
+    from horizon_mpc import closed_loop
+
+    def interrupted_plot(*_args, **_kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", interrupted_plot)
+    out = tmp_path / "out"
+    with caplog.at_level("ERROR"):
+        assert closed_loop.main(["--out", str(out), "--no-gif", "--duration", "0.2"]) == 130
+    assert json.loads((out / "summary.json").read_text())["sim_time"] == pytest.approx(0.2)
+    assert f"interrupted while writing the outputs to {out}: written ['summary.json'], " \
+        "the rest not" in caplog.text
+    assert not list(out.glob("*.png"))
+
+
 @pytest.mark.slow
 def test_an_interrupted_realtime_run_keeps_the_mpc_process_figures(tmp_path, monkeypatch):
     """The child's pid, memory and CPU were lost ("mpc_process": {}) when Ctrl-C came."""
