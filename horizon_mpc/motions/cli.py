@@ -41,7 +41,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-animation", action="store_true", help="skip the GIF")
     p.add_argument("--no-replay", action="store_true",
                    help="leap: skip the open-loop PyBullet replay")
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging and the solver's iterations as they go")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="debug logging and the solver's iterations as they go")
     return p
 
 
