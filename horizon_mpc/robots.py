@@ -32,6 +32,7 @@ _ROBOTS: dict[str, tuple[str, str, str | None]] = {
     "go1": ("go1_description", "urdf/go1.urdf", "srdf/go1.srdf"),
     "a1": ("a1_description", "urdf/a1.urdf", "srdf/a1.srdf"),
     "b1": ("b1_description", "urdf/b1.urdf", "srdf/b1.srdf"),
+    "laikago": ("laikago_description", "urdf/laikago.urdf", None),
     "solo12": ("solo_description", "robots/solo12.urdf", "srdf/solo.srdf"),
     "solo": ("solo_description", "robots/solo.urdf", "srdf/solo.srdf"),
     "anymal_c": ("anymal_c_simple_description", "urdf/anymal.urdf", "srdf/anymal.srdf"),

@@ -1148,6 +1148,24 @@ def test_robot_model_comes_from_robot_description_then_urdf_path_then_the_config
 
 
 @pytest.mark.slow  # a renamed joint: the model's functions are compiled once (~15 s)
+def test_the_log_names_where_the_model_comes_from(tmp_path):
+    """A config with its own urdf_path (a user's robot, e.g. laikago, which walks the
+    default profile from a 15-line config) was logged as 'model from example-robot-data'."""
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.nodes.mpc_node import model_source
+    from horizon_mpc.robots import example_robot_files
+
+    go2 = load_robot_config("go2")
+    urdf = str(example_robot_files("go2").urdf)
+    path = tmp_path / "mine.yaml"
+    path.write_text(f"urdf_path: {urdf}\nfeet: {go2.feet}\n")
+    mine = load_robot_config(str(path))
+    assert model_source(go2) == "example-robot-data"
+    assert model_source(mine) == urdf
+    assert model_source(go2, "/x.urdf") == "/x.urdf"
+    assert model_source(mine, "/x.urdf", "<robot name='r'/>") == "robot_description"
+
+
 def test_the_node_plans_with_the_robot_description_it_is_given(context):
     from horizon_mpc.robots import example_robot_files
 

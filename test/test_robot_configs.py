@@ -27,7 +27,8 @@ SPEED = {"solo12": 0.2}  # m/s forward; 0.3 for the others (solo12 is 2.5 kg, 0.
 
 
 def test_the_configs_are_the_expected_ones():
-    assert {"go2", "solo12", "anymal_c", "a1", "go1", "b1", "anymal_b", "hyq"} <= set(WALKERS)
+    assert {"go2", "solo12", "anymal_c", "a1", "go1", "b1", "anymal_b", "hyq",
+            "laikago"} <= set(WALKERS)
 
 
 @pytest.mark.parametrize("robot", ROBOTS)

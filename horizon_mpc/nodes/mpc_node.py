@@ -155,8 +155,7 @@ class MpcNode(MpcParameters, Node):
             mpc.set_stand_when_idle(settings.stand_when_idle)
             mpc.wp.set_weights(settings.weights)
         self.mpc = mpc
-        source = ("robot_description" if str(self._p("robot_description")).strip() else
-                  str(self._p("urdf_path")) or "example-robot-data")
+        source = model_source(cfg, str(self._p("urdf_path")), str(self._p("robot_description")))
         self.get_logger().info(
             f"built the {cfg.name} walking MPC (model from {source}) in "
             f"{time.perf_counter() - t:.2f} s "
@@ -681,6 +680,15 @@ def _note_kind(topic: str, note: str) -> str:
     so a clamp warning does not hide a note of another kind (ignored fields) on the same
     topic, while the same note with other values stays throttled."""
     return f"{topic}_note:" + re.sub(r"[-+]?\d+(\.\d*)?([eE][-+]?\d+)?", "#", note)
+
+
+def model_source(cfg: RobotConfig, urdf_path: str = "", robot_description: str = "") -> str:
+    """Where the robot model comes from, for the log: the parameters' description or
+    file, else the config's ``urdf_path`` (a user's robot: it said example-robot-data),
+    else example-robot-data."""
+    if robot_description.strip():
+        return "robot_description"
+    return urdf_path or str(cfg.urdf_path or "") or "example-robot-data"
 
 
 def robot_model(cfg: RobotConfig, urdf_path: str = "",
