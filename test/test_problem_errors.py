@@ -133,6 +133,50 @@ def test_gnsqp_refuses_a_general_cost_and_names_it(prb):
         make_solver("gnsqp", prb)
 
 
+@pytest.mark.parametrize("name", ["ilqr", "gnsqp"])
+def test_a_problem_a_solver_refuses_can_still_be_changed(prb, name):
+    """The ILQR finalized (froze) the problem before refusing its general cost: the fix its
+    message names (create_cost with the residual) then raised 'already built into a
+    solver'. Both refuse before freezing it."""
+    u = prb.get_variable("u")
+    prb.create_general_cost("energy", u[0] ** 4)
+    with pytest.raises(ValueError, match="general cost"):
+        make_solver(name, prb)
+    prb.remove("energy")
+    prb.create_cost("energy", u[0] ** 2)
+    assert make_solver(name, prb).solve()
+
+
+@pytest.mark.parametrize("name, key, value, match", [
+    ("ilqr", "equality", "lagrangian", "'equality' of solver 'ilqr' is read when the solver "
+     "is built"),
+    ("ilqr", "inequality", "barrier", "'inequality' .* is read when the solver is built"),
+    ("ilqr", "rho_init", 10.0, "'rho_init' .* is read when the solver is built"),
+    ("ipopt", "sym", "MX", "'sym' of solver 'ipopt' is read when the solver is built"),
+    ("gnsqp", "constraint_rows", "active", "'constraint_rows' .* is read when"),
+    ("ilqr", "input_bounds", "bogus", r"'input_bounds' .* must be one of \['auto', 'box', "
+     r"'lagrangian'\], got 'bogus'"),
+])
+def test_set_option_refuses_build_options_and_values_outside_the_choices(prb, name, key,
+                                                                        value, match):
+    """The ILQR accepted set_option('equality' / 'inequality' / 'rho_init' / ...), read only
+    at construction, and had no effect (inequality: its 'auto' box mode then disagreed
+    with the rows it was built with); input_bounds 'bogus' acted as 'lagrangian'."""
+    solver = make_solver(name, prb)
+    with pytest.raises(ValueError, match=match):
+        solver.set_option(key, value)
+    solver.set_option(key, solver.opts[key])  # the value it has: a no-op, allowed
+
+
+@pytest.mark.parametrize("name, opts", [("ilqr", {"equality": "bogus"}),
+                                        ("ilqr", {"inequality": "Barrier"}),
+                                        ("ipopt", {"sym": "sx"}),
+                                        ("gnsqp", {"constraint_rows": "all"})])
+def test_choice_options_outside_their_choices_are_refused_at_the_build(prb, name, opts):
+    with pytest.raises(ValueError, match=f"'{next(iter(opts))}' .* must be one of"):
+        make_solver(name, prb, opts)
+
+
 def test_terms_cannot_be_added_once_built_into_a_solver(prb):
     make_solver("ipopt", prb)
     with pytest.raises(RuntimeError, match="already built into a solver"):

@@ -88,6 +88,11 @@ class Solver:
     #: default is None), '(0,1)' or '[lo,hi]'; checked with the type, ValueError naming
     #: the option
     RANGES: dict[str, str] = {}
+    #: option -> the values it may take (a choice among names), checked as RANGES are
+    CHOICES: dict[str, tuple[str, ...]] = {}
+    #: options read when the solver is built: set_option refuses to change them (the change
+    #: would be accepted and have no effect)
+    BUILD_ONLY: tuple[str, ...] = ()
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         self.prb = prb
@@ -96,6 +101,8 @@ class Solver:
                             f"got {type(opts).__name__}")
         self.opts = self._merge_options(dict(opts or {}))
         self._check_together(self.opts)
+        # before finalize(): a problem refused here can still be changed and solved
+        self._check_problem(prb)
         prb.finalize()
         self._structure_revision = prb.structure_revision
         self.solution: dict[str, np.ndarray] = {}
@@ -143,11 +150,19 @@ class Solver:
             if key in known:
                 self._check_option_type(key, value, known[key])
                 self._check_option_range(key, value)
+                choices = self.CHOICES.get(key)
+                if choices is not None and value not in choices:
+                    raise ValueError(f"option {key!r} of solver {self.name!r} must be one of "
+                                     f"{list(choices)}, got {value!r}")
         return {**known, **opts}
 
     def _check_together(self, opts: dict[str, Any]) -> None:
         """ValueError/TypeError when options are inconsistent with each other (e.g. a
         minimum above its maximum): a hook, run on every change with all the options."""
+
+    def _check_problem(self, prb: Problem) -> None:
+        """ValueError when this solver cannot solve ``prb`` (a hook, run before the problem
+        is finalized, so that the user can still change it)."""
 
     def _check_option_range(self, key: str, value: Any) -> None:
         """ValueError unless a number option is within its :attr:`RANGES` (NaN never is)."""
@@ -193,8 +208,11 @@ class Solver:
         return []
 
     def set_option(self, key: str, value: Any) -> None:
-        """Change one option between solves."""
-        self._merge_options({key: value})  # validates the name
+        """Change one option between solves (not one of :attr:`BUILD_ONLY`)."""
+        self._merge_options({key: value})  # validates the name and the value
+        if key in self.BUILD_ONLY and value != self.opts[key]:
+            raise ValueError(f"option {key!r} of solver {self.name!r} is read when the solver "
+                             "is built: set it in make_solver's options")
         self._check_together({**self.opts, key: value})
         self.opts[key] = value
 

@@ -62,7 +62,7 @@ import casadi as cs
 import numpy as np
 
 from horizon_mpc.problem import Problem
-from horizon_mpc.problem.transcription import Transcription
+from horizon_mpc.problem.terms import GeneralCost
 from horizon_mpc.solvers.nlp_solver import NlpSolver
 
 __all__ = ["GnSqpSolver"]
@@ -104,15 +104,9 @@ class GnSqpSolver(NlpSolver):
               "nonmonotone": ">=1", "elastic_penalty": ">0"}
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
-        general = [n for n, c in prb.costs.items() if c.kind == "general cost"]
-        if general:
-            raise ValueError(f"gnsqp minimises sums of squared residuals; the general cost(s) "
-                             f"{general} need a full Hessian: use the 'ipopt' solver, or write "
-                             "them as residuals with create_cost()")
         super().__init__(prb, opts)
         _check_qp_solver(self.opts["qp_solver"])
-        tr = self.transcription = Transcription(
-            prb, sym=self.opts["sym"], constraint_rows=self.opts["constraint_rows"])
+        tr = self.transcription
         # The SQP works on w and g sorted stage-wise (see Transcription.node_order): the
         # KKT matrices are then banded and the QP factorisations stay sparse.
         self._pw, self._pg = tr.node_order()
@@ -134,14 +128,16 @@ class GnSqpSolver(NlpSolver):
         self._evaluate = cs.Function("gn_evaluate", [w, P], [f, g], ["w", "p"], ["f", "g"])
         self._H_sp, self._A_sp = H.sparsity(), J_g.sparsity()
         self._qp: dict[bool, cs.Function] = {}
-        self.lam_x: np.ndarray | None = None
-        self.lam_g: np.ndarray | None = None
-        self.w: np.ndarray | None = None
+
+    def _check_problem(self, prb: Problem) -> None:
+        general = [n for n, c in prb.costs.items() if isinstance(c, GeneralCost)]
+        if general:
+            raise ValueError(f"gnsqp minimises sums of squared residuals; the general cost(s) "
+                             f"{general} need a full Hessian: use the 'ipopt' solver, or write "
+                             "them as residuals with create_cost()")
 
     def set_option(self, key: str, value: Any) -> None:
         """Change one option; a new QP solver is built on the next solve if needed."""
-        if key in ("sym", "constraint_rows") and value != self.opts[key]:
-            raise ValueError(f"option {key!r} fixes the NLP; set it when building the solver")
         if key == "qp_solver":
             _check_qp_solver(value)
         super().set_option(key, value)
@@ -301,7 +297,6 @@ class GnSqpSolver(NlpSolver):
                 return alpha
             alpha *= 0.5
         return None
-
 
 
 def _not_finite_at_guess(w: np.ndarray, p: np.ndarray, f: float, viol: float) -> str:

@@ -33,10 +33,8 @@ import time
 from typing import Any
 
 import casadi as cs
-import numpy as np
 
 from horizon_mpc.problem import Problem
-from horizon_mpc.problem.transcription import Transcription
 from horizon_mpc.solvers.nlp_solver import NlpSolver
 
 __all__ = ["IpoptSolver"]
@@ -65,22 +63,15 @@ class IpoptSolver(NlpSolver):
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
-        self.transcription = Transcription(
-            prb, sym=self.opts["sym"], constraint_rows=self.opts["constraint_rows"])
         self._solvers: dict[bool, cs.Function] = {}
         nlp = self.transcription.nlp  # the returned point's f and g, whatever IPOPT filled
         self._fg = cs.Function("ipopt_fg", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]])
-        self.lam_x: np.ndarray | None = None
-        self.lam_g: np.ndarray | None = None
-        self.w: np.ndarray | None = None
 
     def _passthrough_keys(self, opts: dict[str, Any]) -> list[str]:
         return [k for k in opts if k.startswith(("ipopt.", "nlpsol."))]
 
     def set_option(self, key: str, value: Any) -> None:
         """Change one option; the IPOPT instances are rebuilt on the next solve."""
-        if key in ("sym", "constraint_rows") and value != self.opts[key]:
-            raise ValueError(f"option {key!r} fixes the NLP; set it when building the solver")
         super().set_option(key, value)
         self._solvers.clear()
 

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from horizon_mpc.problem import Problem
 from horizon_mpc.problem.transcription import Transcription
 from horizon_mpc.solvers.base import Solver
 
@@ -13,13 +16,22 @@ __all__ = ["NlpSolver"]
 class NlpSolver(Solver):
     """A solver on a :class:`Transcription` that keeps bound and constraint multipliers.
 
-    Subclasses set ``self.transcription`` and fill ``lam_x`` (nw) / ``lam_g`` (ng) after a
-    solve; ``shift()`` moves them one node back with the guesses, ``reset()`` forgets them.
+    Builds ``self.transcription`` with the options ``sym`` and ``constraint_rows`` (which
+    subclasses declare in their DEFAULTS); subclasses fill ``w`` (nw), ``lam_x`` (nw) and
+    ``lam_g`` (ng) after a solve; ``shift()`` moves the multipliers one node back with the
+    guesses, ``reset()`` forgets them.
     """
 
-    transcription: Transcription
-    lam_x: np.ndarray | None = None
-    lam_g: np.ndarray | None = None
+    CHOICES = {"sym": ("SX", "MX"), "constraint_rows": ("valid", "active")}
+    BUILD_ONLY = ("sym", "constraint_rows")  # they fix the NLP
+
+    def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
+        super().__init__(prb, opts)
+        self.transcription = Transcription(
+            prb, sym=self.opts["sym"], constraint_rows=self.opts["constraint_rows"])
+        self.w: np.ndarray | None = None
+        self.lam_x: np.ndarray | None = None
+        self.lam_g: np.ndarray | None = None
 
     def shift(self) -> None:
         """Shift the guesses and parameters (``Problem.shift``) and the multipliers."""

@@ -42,7 +42,7 @@ from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
 from horizon_mpc.solvers.ilqr.evaluation import CompiledEvaluation
 from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian
 from horizon_mpc.solvers.ilqr.lq_step import CompiledLqStep
-from horizon_mpc.solvers.ilqr.stages import build_stage_model
+from horizon_mpc.solvers.ilqr.stages import build_stage_model, check_supported
 
 __all__ = ["IlqrSolver"]
 
@@ -131,6 +131,12 @@ class IlqrSolver(Solver):
         "barrier_delta": 1.0,
     }
 
+    CHOICES = {"equality": ("projection", "lagrangian"),
+               "input_bounds": ("auto", "box", "lagrangian"),
+               "inequality": ("lagrangian", "barrier")}
+    # built into the stage model and the multipliers' rows at construction
+    BUILD_ONLY = ("codegen", "equality", "inequality", "barrier_mu", "barrier_delta",
+                  "rho_init")
     RANGES = {
         "max_iter": ">=1", "iterations_per_call": ">=1", "tol": ">=0", "tol_constraint": ">=0",
         "tol_complementarity": ">=0", "mu_init": ">=0", "mu_min": ">=0", "mu_max": ">0",
@@ -147,14 +153,11 @@ class IlqrSolver(Solver):
             raise TypeError(f"ilqr option 'callback' must be callable (called with a dict per "
                             f"iteration) or None, got {opts['callback']!r}")
 
+    def _check_problem(self, prb: Problem) -> None:
+        check_supported(prb)
+
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
-        if self.opts["equality"] not in ("projection", "lagrangian"):
-            raise ValueError(f"ilqr option 'equality' must be 'projection' or 'lagrangian', "
-                             f"got {self.opts['equality']!r}")
-        if self.opts["input_bounds"] not in ("auto", "box", "lagrangian"):
-            raise ValueError(f"ilqr option 'input_bounds' must be 'auto', 'box' or "
-                             f"'lagrangian', got {self.opts['input_bounds']!r}")
         self._auto_box = False  # 'auto': this call went on with the box (_switch_to_box)
         self._box_kept = False  # 'auto': a converging call did: the next ones start with it
         self._shifted = False  # shift() since the last call (see _begin_call)

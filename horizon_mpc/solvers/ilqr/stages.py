@@ -74,7 +74,9 @@ class StageModel:
     quadratise_full: Callable[[], cs.Function] | None = None
 
 
-def _check_supported(prb: Problem) -> None:
+def check_supported(prb: Problem) -> None:
+    """ValueError naming what of ``prb`` the ILQR cannot honour (general costs, offset
+    terms, free single variables, collocation)."""
     for term in [*prb.constraints.values(), *prb.costs.values()]:
         if isinstance(term, GeneralCost):
             raise ValueError(f"ilqr needs residual costs (Gauss-Newton); {term.name!r} is a "
@@ -155,8 +157,8 @@ def build_stage_model(prb: Problem, codegen: bool = True,
         ValueError: the problem uses something the ILQR cannot honour (general costs,
             offset terms, free single variables, collocation).
     """
+    check_supported(prb)
     prb.finalize()
-    _check_supported(prb)
     N = prb.n_nodes
     nx, ndx, nu, ns, npar = prb.nx, prb.ndx, prb.nu, prb.ns, prb.np_
     x, u = cs.SX.sym("x", nx), cs.SX.sym("u", nu)
