@@ -6,7 +6,6 @@ schedule, costs, solver.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import casadi as cs
@@ -27,7 +26,6 @@ from horizon_mpc.problem import Parameter, Problem
 
 __all__ = ["WalkingProblem", "build_walking_problem"]
 
-log = logging.getLogger(__name__)
 
 
 @dataclass

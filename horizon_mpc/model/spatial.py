@@ -171,7 +171,3 @@ def transform_inertia_to_parent(tr: Transform, blocks: tuple) -> tuple:
     return a1, b_p, c_p
 
 
-def blocks_apply(blocks: tuple, m: Motion) -> Force:
-    """``[[A, B], [B^T, C]] @ (lin, ang)``."""
-    a, b, c = blocks
-    return a @ m[0] + b @ m[1], b.T @ m[0] + c @ m[1]

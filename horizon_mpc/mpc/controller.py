@@ -11,7 +11,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -30,7 +30,6 @@ from horizon_mpc.locomotion.pose_reference import (
 from horizon_mpc.model import RobotModel
 from horizon_mpc.mpc.schedule import GaitScheduler
 from horizon_mpc.solvers import make_solver
-from horizon_mpc.solvers.base import SolverStats
 
 __all__ = ["Plan", "WalkingMpc"]
 
@@ -557,7 +556,7 @@ class WalkingMpc:
         # tau is left to the consumer: the node needs the first few nodes only
         sol = self.solver.solution
         return Plan(t, self.settings.dt, sol["q"].copy(), sol["v"].copy(), sol["a"].copy(),
-                    sol["f"].copy(), self._stance.copy(), _stats_dict(self.solver.stats),
+                    sol["f"].copy(), self._stance.copy(), self.solver.stats.as_dict(history=False),
                     self.inverse_dynamics)
 
     # ------------------------------------------------------------------ live settings
@@ -584,14 +583,6 @@ class WalkingMpc:
         """With a zero command, keep the feet down (True) or keep the gait stepping in place
         (False); takes effect at the next tick."""
         self.settings.stand_when_idle = self.scheduler.stand_when_idle = bool(stand)
-
-
-def _stats_dict(stats: SolverStats) -> dict:
-    """``stats.as_dict()`` without the iteration history (and without copying it)."""
-    out = {f.name: getattr(stats, f.name) for f in fields(stats)
-           if f.name not in ("history", "extra")}
-    out.update({k: dict(x) if isinstance(x, dict) else x for k, x in stats.extra.items()})
-    return out
 
 
 def _pose(q: np.ndarray) -> tuple[float, float, float]:

@@ -75,6 +75,8 @@ _WATCH_PERIOD = 2.0  # s (wall): states arriving this long without a tick get ex
 INFEASIBLE_PLAN = 0.3
 MISS_WARN_SHARE = 0.2  # prepare misses among the recent ticks beyond which the node warns
 _RECENT_STATES = 8  # joint_states / odom messages kept to pair them by stamp
+
+
 class MpcNode(MpcParameters, Node):
     """The MPC node. Construct after ``rclpy.init()``; spin it with any executor.
 

@@ -71,7 +71,6 @@ class Problem:
         self._integrator: Integrator = get_integrator("rk4")
         self.collocation_degree = 3
         self._finalized = False
-        self._cache: dict[str, object] = {}
         self._revision = 0  # see structure_revision
 
     # ------------------------------------------------------------------ variables
@@ -260,7 +259,6 @@ class Problem:
         self.integrator_name = integrator if isinstance(integrator, str) else "custom"
         self.transcription = method
         self.collocation_degree = int(degree)
-        self._cache.clear()
         self._revision += 1
 
     @property

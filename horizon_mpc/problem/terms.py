@@ -33,7 +33,7 @@ class Term:
         name: unique name in the problem.
         expr: the expression (SX column).
         dim: its number of rows.
-        function: ``casadi.Function`` of the node arguments (see ``Problem.node_inputs``).
+        function: ``casadi.Function`` of the node arguments (see ``Problem.node_arguments``).
         uses_input: whether the expression depends on the inputs of its node.
         offsets: sorted node offsets of the offset variables it uses.
         valid_nodes: nodes where the term can be evaluated.

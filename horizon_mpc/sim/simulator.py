@@ -265,10 +265,6 @@ class Simulator:
         if reset_time:
             self._steps = 0
 
-    def _state_finite(self) -> bool:
-        st = self.state()
-        return bool(np.all(np.isfinite(st.q)) and np.all(np.isfinite(st.v)))
-
     def set_state(self, q: np.ndarray, v: np.ndarray | None = None) -> None:
         """Teleport the robot to ``q`` (nq,) with velocity ``v`` (nv,) (Pinocchio conventions).
 

@@ -20,7 +20,7 @@ import math
 import numbers
 import sys
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -54,11 +54,17 @@ class SolverStats:
     def __getitem__(self, key: str) -> Any:  # dict-style access: stats['iterations']
         return asdict(self)[key] if key != "extra" else self.extra
 
-    def as_dict(self) -> dict[str, Any]:
-        """A JSON-friendly dict."""
-        d = asdict(self)
-        d.update(d.pop("extra"))
-        return d
+    def as_dict(self, history: bool = True) -> dict[str, Any]:
+        """A JSON-friendly dict, ``extra`` merged in; without the iteration ``history``
+        when asked (cheap enough for every tick of an MPC: no deep copy)."""
+        if history:
+            d = asdict(self)
+            d.update(d.pop("extra"))
+            return d
+        out = {f.name: getattr(self, f.name) for f in fields(self)
+               if f.name not in ("history", "extra")}
+        out.update({k: dict(x) if isinstance(x, dict) else x for k, x in self.extra.items()})
+        return out
 
 
 class _StdoutHandler(logging.StreamHandler):
