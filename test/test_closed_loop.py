@@ -690,6 +690,20 @@ def test_the_lockstep_loop_steps_at_the_nodes_control_rate():
     assert rec.prepare_misses == 0  # each tick on the state it prepared for
 
 
+@pytest.mark.slow
+def test_a_control_rate_faster_than_the_nodes_walks_on_nodes_of_its_period():
+    """-p control_rate=100 with the config's 0.02 s nodes: half a node a tick, and go2 fell
+    at 2.9 s. A faster control rate now sets dt (0.01 s) and the nodes (48, the same
+    0.48 s horizon) unless they are given: it walks, tracking as at 50 Hz."""
+    segs = [Segment(1.0), Segment(3.0, 0.3)]
+    rec = run("go2", segs, mode="lockstep", gif=False, mpc_parameters={"control_rate": 100})
+    summary = summarise(rec, segs, robot="go2")
+    assert summary["falls"]["count"] == 0
+    assert summary["ticks_per_sim_second"] == pytest.approx(100, rel=1e-9)
+    assert rec.prepare_misses == 0
+    assert summary["segments"][1]["mean"]["vx"] == pytest.approx(0.3, abs=0.03)
+
+
 def _interrupt_the_loop_at(monkeypatch, t_stop: float) -> None:
     """Ctrl-C in the closed loop's first control period at or after ``t_stop`` (sim s)."""
     from horizon_mpc import closed_loop

@@ -1009,6 +1009,39 @@ def test_a_drivers_states_off_the_tick_times_get_the_prepared_feedback_steps(con
         node.destroy_node()
 
 
+def test_states_off_the_tick_grid_do_not_make_the_ticks_drift_back(context, walking_mpc):
+    """States on a grid the ticks are not on (100 Hz ticks, 250 Hz states in the real-time
+    closed loop): the state nearest the prepared time came before it, and the next
+    preparation, one period after that state's stamp, drifted back by up to
+    feedback_tolerance every tick: the plans were 32 ms old at 100 Hz. The preparations
+    stay on the node's grid; the plans keep their states' stamps."""
+    node = sim_time_node(context, walking_mpc, trigger="timer", prepare_ahead=True)
+    try:
+        sent = Sent()
+        node._pub_traj, node._pub_path, node._pub_diag = sent, Sent(), Sent()
+        _, q = standing_configuration(node.mpc.cfg)
+        start, period, state = 10 * NS_PER_S, 20_000_000, 3_000_000  # 333 Hz states
+        k = 0
+        for tick in range(16):
+            tick_ns = start + tick * period
+            while start + k * state <= tick_ns + 600_000:  # what came before the tick
+                _feed_state(node, start + k * state, q)
+                k += 1
+            if tick == 0:
+                assert node.tick()  # the bootstrap, on the state at `start`
+                misses = node.mpc.prepare_misses
+                continue
+            assert node._prepared_ns == tick_ns  # on the grid, every tick
+            assert node.tick()
+            used = time_to_ns(sent.msgs[-1].header.stamp)
+            assert abs(used - tick_ns) <= 2_000_000 and used % state == start % state
+            assert node.mpc.solver.stats.status == "feedback"
+        assert node.mpc.prepare_misses == misses
+    finally:
+        walking_mpc.settings.prepare_ahead = False  # the fixture is shared
+        node.destroy_node()
+
+
 def test_prepare_ahead_ticks_are_feedback_steps_stamped_at_their_plan_time(context,
                                                                              walking_mpc):
     """With prepare_ahead, a state on the prepared tick time is answered by the feedback
@@ -1360,6 +1393,20 @@ def test_gait_settings_and_weights_outside_where_the_trot_walked_are_warned_abou
     warned.clear()
     assert h.node.set_parameters([Parameter("max_vx", value=0.4)])[0].successful
     assert warned == []  # a weight set before is not warned about again
+
+
+def test_a_control_rate_faster_than_the_nodes_sets_dt_and_the_nodes():
+    """At 100 Hz with 0.02 s nodes (half a node a tick) go2 fell; on 0.01 s nodes, 48 of
+    them (the same horizon), it walked, in lockstep and in real time. Below 0.01 s (not
+    seen walking) and for slower rates the config's nodes stay."""
+    from horizon_mpc.nodes.mpc_parameters import horizon_for_rate
+
+    assert horizon_for_rate(0.02, 24, 100.0) == pytest.approx((0.01, 48))
+    dt, n = horizon_for_rate(0.02, 24, 83.0)
+    assert dt == pytest.approx(1 / 83) and n == 40
+    assert horizon_for_rate(0.02, 24, 50.0) is None  # one node a tick
+    assert horizon_for_rate(0.02, 24, 25.0) is None  # two
+    assert horizon_for_rate(0.02, 24, 200.0) is None  # 5 ms nodes: never seen walking
 
 
 def test_prepare_ahead_needs_whole_nodes_per_tick(context, walking_mpc):

@@ -309,7 +309,9 @@ class WalkingMpc:
         At the prepared time (``SAME_TIME``) the plan starts there; within
         ``settings.max_extrapolation`` the state is predicted to it; within
         ``settings.feedback_tolerance`` the prepared step takes the state as measured and
-        the plan starts at ``t``."""
+        the plan starts at ``t``, while the controller stays on the prepared time's grid
+        (``t_last``): the next preparation from ``t`` let the tick times drift back by up
+        to the tolerance each tick."""
         st = self.settings
         t_plan, self._prepared_for = self._prepared_for, None
         lead = t_plan - t
@@ -326,15 +328,16 @@ class WalkingMpc:
             acc = self._accel_before if lead > 0 else self._accel_after  # set by prepare()
             q = pin.integrate(self.model.pin_model, q, (v + 0.5 * lead * acc) * lead)
             v = v + lead * acc
+            t_stamp = t_plan
         else:
-            t_plan = t
+            t_stamp = t
         self.t_last = t_plan
         self._pose_expected = _pose(q)
         self.solver.feedback(np.concatenate((q, v)))
         if not self._healthy():
             self._restore_standing(q)
             self._set_state(q, v)
-        plan = self._plan(t_plan)
+        plan = self._plan(t_stamp)
         plan.stats["iterations"] = self.iterations
         return plan
 

@@ -102,7 +102,7 @@ class MpcNode(MpcParameters, Node):
         cfg = load_robot_config(self._p("config") or self._p("robot"))
         settings = (mpc.settings if mpc is not None
                     else MpcSettings.from_dict(cfg.section("mpc")))
-        self._declare_parameters(settings)
+        self._declare_parameters(settings, rate_sets_horizon=mpc is None)
         horizon = (int(self._p("n_nodes")), float(self._p("dt")))
         if mpc is not None and horizon != (settings.n_nodes, settings.dt):
             raise ValueError(f"n_nodes/dt {horizon} differ from those of the given MPC "
@@ -516,6 +516,7 @@ class MpcNode(MpcParameters, Node):
         cmd = self.command
         previous_ns, self._last_tick_stamp = self._last_tick_stamp, stamp_ns
         bootstrap = self.plan is None
+        prepared = False  # a preparation awaited this tick
         wall = time.perf_counter()
         try:
             if bootstrap:
@@ -524,6 +525,7 @@ class MpcNode(MpcParameters, Node):
                                        f"{time.perf_counter() - wall:.2f} s; ticking")
             else:
                 misses, restarts = self.mpc.prepare_misses, self.mpc.restarts
+                prepared = self.mpc.prepared_for is not None
                 plan = self.mpc.update(t, q, v, cmd)
                 # a restart (a reset simulator) is a bootstrap solve: no deadline to miss
                 bootstrap = self.mpc.restarts > restarts
@@ -541,6 +543,12 @@ class MpcNode(MpcParameters, Node):
         # the plan starts at the state's stamp, or at the prepared tick time when the state
         # was predicted to it (WalkingMpc.update)
         plan_ns = stamp_ns if plan.t0 == t else self._prepared_ns
+        # the next tick is one period after this one's time on the node's grid: the prepared
+        # time when the preparation served (a state within feedback_tolerance plans from
+        # its own stamp; one period after that let the ticks drift back by up to the
+        # tolerance each: 32 ms behind at 100 Hz with 250 Hz states), else the plan's
+        served = not bootstrap and prepared and not self._recent_misses[-1]
+        grid_ns = self._prepared_ns if served else plan_ns
         self.plan = plan
         self.ticks += 1
         self._pub_traj.publish(self.trajectory_msg(plan, plan_ns))
@@ -550,7 +558,7 @@ class MpcNode(MpcParameters, Node):
         self.last_prepare_time = 0.0
         if self.mpc.settings.prepare_ahead:
             try:
-                self._prepared_ns = plan_ns + self._period_ns
+                self._prepared_ns = grid_ns + self._period_ns
                 self.mpc.prepare(self._prepared_ns / NS_PER_S, cmd)
             except Exception as exc:  # noqa: BLE001 - as above; the next tick runs whole
                 self.solver_errors += 1

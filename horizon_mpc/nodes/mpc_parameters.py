@@ -22,12 +22,12 @@ from rclpy.parameter import Parameter
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.locomotion.gaits import EXPERIMENTAL_GAITS, GAITS
 from horizon_mpc.locomotion.settings import MAX_COMMAND_NORM, Weights
-from horizon_mpc.nodes.declare import declare, float_range, int_range
+from horizon_mpc.nodes.declare import declare, float_range, int_range, parameter_overrides
 
 __all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MIN_DUTY_FACTOR",
            "MODEL_PARAMETERS", "MODEL_PARAMETER_DECLARATIONS", "WEIGHT_FIELDS", "MpcParameters",
            "gait_duty_factor", "gait_warnings", "parameter_names", "parameter_table",
-           "timing_warnings", "weight_warnings"]
+           "horizon_for_rate", "timing_warnings", "weight_warnings"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
@@ -116,6 +116,18 @@ def weight_warnings(weights: Weights, names: list[str] | None = None) -> list[st
     return out
 
 
+def horizon_for_rate(dt: float, n_nodes: int, control_rate: float) -> tuple[float, int] | None:
+    """``(dt, n_nodes)`` for a control rate faster than one node of ``dt`` per tick: the
+    control period as the node interval and as many nodes as keep the horizon's duration,
+    when that period is one the walking MPC was seen to walk with (``WALKED_DT``); else
+    None. A tick of a fraction of a node made go2 fall (100 Hz at dt 0.02 s); at dt 0.01 s
+    and 48 nodes it walked, in lockstep and in real time (doc/mpc_node.md)."""
+    period = 1.0 / control_rate
+    if not (period < dt - 1e-12 and period >= WALKED_DT[0] - 1e-12):
+        return None
+    return period, max(2, round(n_nodes * dt / period))
+
+
 def timing_warnings(dt: float, n_nodes: int, period: float, publish_points: int,
                     trigger: str = "timer") -> list[str]:
     """What in these timing settings is outside where the walking MPC was seen to walk, or
@@ -164,12 +176,29 @@ class MpcParameters:
                  irng: list[IntegerRange] | None = None, ro: bool = False) -> None:
         declare(self, name, default, description, rng, irng, read_only=ro)
 
-    def _declare_parameters(self, st: MpcSettings) -> None:
+    def _declare_parameters(self, st: MpcSettings, rate_sets_horizon: bool = True) -> None:
+        """Declare every parameter, defaults from ``st`` (the config's MPC settings); with
+        ``rate_sets_horizon``, a ``control_rate`` given faster than one node per tick sets
+        the defaults of ``dt`` and ``n_nodes`` (:func:`horizon_for_rate`)."""
         d = self._declare
-        d("n_nodes", int(st.n_nodes), "horizon nodes (intervals) of the walking problem "
-          "(default: the config's mpc.n_nodes)", irng=int_range(2, 500), ro=True)
-        d("dt", float(st.dt), "duration of one horizon node (s; default: the config's "
-          "mpc.dt)", float_range(0.001, 0.5), ro=True)
+        n_nodes, dt = int(st.n_nodes), float(st.dt)
+        given = parameter_overrides(self)
+        rate = given["control_rate"].value if "control_rate" in given else None
+        chosen = (horizon_for_rate(dt, n_nodes, float(rate)) if rate_sets_horizon
+                  and "dt" not in given and isinstance(rate, (int, float))
+                  and not isinstance(rate, bool) and rate > 0 else None)
+        if chosen is not None:
+            dt, n_nodes = chosen[0], (n_nodes if "n_nodes" in given else chosen[1])
+            self.get_logger().info(
+                f"control_rate {rate:g} Hz is faster than the config's nodes of {st.dt:g} s: "
+                f"dt {dt:g} s and {n_nodes} nodes ({n_nodes * dt:g} s of horizon; -p dt and "
+                "-p n_nodes choose others)")
+        d("n_nodes", n_nodes, "horizon nodes (intervals) of the walking problem "
+          "(default: the config's mpc.n_nodes, scaled with dt when a faster control_rate "
+          "sets it)", irng=int_range(2, 500), ro=True)
+        d("dt", dt, "duration of one horizon node (s; default: the config's mpc.dt, or the "
+          "control period of a control_rate faster than that, down to "
+          f"{WALKED_DT[0]:g} s)", float_range(0.001, 0.5), ro=True)
         d("control_rate", 1.0 / float(self._p("dt")), "MPC ticks per second of the node "
           "clock (trigger timer; default: 1 / dt)", float_range(1, 1000), ro=True)
         d("iterations", int(st.iterations), "ILQR iterations per tick (default: the config's "
