@@ -13,7 +13,7 @@ import casadi as cs
 import numpy as np
 
 from horizon_mpc.model import RobotModel
-from horizon_mpc.problem import Constraint, Cost, Problem
+from horizon_mpc.problem import Constraint, Cost, Parameter, Problem
 
 __all__ = [
     "ContactTerms",
@@ -52,7 +52,7 @@ class ContactTerms:
     friction: dict[str, Constraint] = field(default_factory=dict)
     zero_force: dict[str, Constraint] = field(default_factory=dict)
     clearance: dict[str, Constraint | Cost] = field(default_factory=dict)
-    swing_z: object = None  # the swing height Parameter (n_feet)
+    swing_z: Parameter | None = None  # the swing height Parameter (n_feet)
 
     def set_schedule(self, stance: np.ndarray, swing_z: np.ndarray | None = None) -> None:
         """Activate stance/swing terms per node from ``stance`` (n_feet, N+1) booleans.

@@ -19,10 +19,10 @@ from horizon_mpc.locomotion.formulation import (
     base_rotation,
     floating_base_double_integrator,
 )
-from horizon_mpc.locomotion.settings import MpcSettings
+from horizon_mpc.locomotion.settings import MpcSettings, Weights
 from horizon_mpc.model import RobotModel
 from horizon_mpc.posture import standing_configuration
-from horizon_mpc.problem import Parameter, Problem
+from horizon_mpc.problem import InputVariable, Parameter, Problem, StateVariable
 
 __all__ = ["WalkingProblem", "build_walking_problem"]
 
@@ -36,10 +36,10 @@ class WalkingProblem:
     model: RobotModel
     feet: list[str]
     settings: MpcSettings
-    q: object
-    v: object
-    a: object
-    f: object
+    q: StateVariable  # (nq,) configuration
+    v: StateVariable  # (nv,) velocity
+    a: InputVariable  # (nv,) acceleration
+    f: InputVariable  # (3 n_feet,) contact forces, world frame
     contacts: ContactTerms
     v_ref: Parameter  # (6,) base twist reference in the base frame
     pose_ref: Parameter  # (4,) x, y, cos(yaw), sin(yaw) reference
@@ -61,7 +61,7 @@ class WalkingProblem:
         f0 = np.tile([0.0, 0.0, self.model.mass * 9.81 / nf], nf)
         self.f.set_initial_guess(f0)
 
-    def set_weights(self, weights) -> None:
+    def set_weights(self, weights: Weights) -> None:
         """Apply a :class:`Weights` to the costs (live, no rebuild)."""
         w = weights
         costs = self.prb.costs

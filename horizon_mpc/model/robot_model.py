@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import casadi as ca
 import numpy as np
@@ -29,6 +30,9 @@ from horizon_mpc.model.joints import joint_specs
 from horizon_mpc.model.kinematics import REFERENCE_FRAMES, FrameSpec, TreeKinematics
 from horizon_mpc.model.loading import load_pin_model
 from horizon_mpc.model.srdf import read_group_states
+
+if TYPE_CHECKING:
+    from horizon_mpc.config import RobotConfig
 
 __all__ = ["RobotModel", "UnknownNameError"]
 
@@ -152,7 +156,7 @@ class RobotModel(SymbolicFunctions):
         return cls.from_urdf(files.urdf, floating_base=floating_base, srdf=files.srdf, name=name)
 
     @classmethod
-    def from_config(cls, cfg) -> RobotModel:
+    def from_config(cls, cfg: RobotConfig) -> RobotModel:
         """Model of a robot config (:class:`horizon_mpc.config.RobotConfig`): its
         ``urdf_path`` when it has one, else its example-robot-data robot."""
         return cls.from_urdf(cfg.urdf_path) if cfg.urdf_path else cls.from_example(cfg.robot)

@@ -13,13 +13,21 @@ or ``(dim,)`` value then fills them).
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
+import casadi as cs
 import numpy as np
 
 NodeSelection = int | Iterable[int] | slice | range | None
+#: per-node values (bounds, guesses, weights): a scalar, ``(dim,)`` for every selected node,
+#: or ``(dim, n_sel)`` one column per selected node
+Values = float | Sequence[float] | np.ndarray
+#: what a term takes: an SX expression of the problem's variables (variables are SX), a
+#: number or array, or a list of those (stacked)
+Expression = cs.SX | float | np.ndarray | Sequence
 
-__all__ = ["NodeSelection", "broadcast_values", "check_bounds", "select_nodes"]
+__all__ = ["Expression", "NodeSelection", "Values", "broadcast_values", "check_bounds",
+           "select_nodes"]
 
 
 def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "",

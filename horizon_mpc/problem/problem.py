@@ -25,7 +25,7 @@ import casadi as cs
 import numpy as np
 
 from horizon_mpc.problem.integrators import Integrator, get_integrator
-from horizon_mpc.problem.nodes import NodeSelection
+from horizon_mpc.problem.nodes import Expression, NodeSelection, Values
 from horizon_mpc.problem.terms import Constraint, Cost, GeneralCost, Term
 from horizon_mpc.problem.variables import (
     InputVariable,
@@ -432,25 +432,28 @@ class Problem:
         store[name] = term
         return term
 
-    def create_constraint(self, name: str, expr, nodes: NodeSelection = None,
-                          bounds: tuple | None = None) -> Constraint:
+    def create_constraint(self, name: str, expr: Expression, nodes: NodeSelection = None,
+                          bounds: tuple[Values, Values] | None = None) -> Constraint:
         """``lb <= expr <= ub`` on ``nodes`` (None: all valid nodes); default ``expr == 0``."""
         return self._add_term(Constraint, self.constraints, name, expr, nodes, bounds=bounds)
 
-    def create_final_constraint(self, name: str, expr, bounds: tuple | None = None) -> Constraint:
+    def create_final_constraint(self, name: str, expr: Expression,
+                                bounds: tuple[Values, Values] | None = None) -> Constraint:
         """A constraint on the final node N only."""
         return self.create_constraint(name, expr, nodes=self.n_nodes, bounds=bounds)
 
-    def create_cost(self, name: str, residual, nodes: NodeSelection = None,
-                    weight=1.0) -> Cost:
+    def create_cost(self, name: str, residual: Expression, nodes: NodeSelection = None,
+                    weight: Values = 1.0) -> Cost:
         """Residual cost ``sum_k weight * ||residual_k||^2`` on ``nodes``."""
         return self._add_term(Cost, self.costs, name, residual, nodes, weight=weight)
 
-    def create_final_cost(self, name: str, residual, weight=1.0) -> Cost:
+    def create_final_cost(self, name: str, residual: Expression,
+                          weight: Values = 1.0) -> Cost:
         """A residual cost on the final node N only."""
         return self.create_cost(name, residual, nodes=self.n_nodes, weight=weight)
 
-    def create_general_cost(self, name: str, expr, nodes: NodeSelection = None) -> GeneralCost:
+    def create_general_cost(self, name: str, expr: Expression,
+                            nodes: NodeSelection = None) -> GeneralCost:
         """A general scalar cost ``sum_k expr_k`` (IPOPT only; GN solvers refuse it)."""
         expr = self._as_sx(expr, f"general cost {name!r}")
         if expr.shape != (1, 1):

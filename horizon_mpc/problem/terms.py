@@ -16,7 +16,13 @@ import itertools
 import casadi as cs
 import numpy as np
 
-from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, check_bounds, select_nodes
+from horizon_mpc.problem.nodes import (
+    NodeSelection,
+    Values,
+    broadcast_values,
+    check_bounds,
+    select_nodes,
+)
 
 __all__ = ["Constraint", "Cost", "GeneralCost", "Term", "revisions", "stacked_active",
            "stacked_bounds", "stacked_weights"]
@@ -119,7 +125,7 @@ class Constraint(Term):
                                 f"got {bounds!r}")
             self.set_bounds(*bounds)
 
-    def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:
+    def set_bounds(self, lb: Values, ub: Values, nodes: NodeSelection = None) -> None:
         """Set the bounds on ``nodes`` (None: all nodes); scalar, (dim,) or (dim, n_sel)."""
         idx = (np.arange(self.n_nodes + 1) if nodes is None
                else select_nodes(nodes, self.n_nodes + 1, f"constraint {self.name!r}",
@@ -157,7 +163,7 @@ class Cost(Term):
         self._weight = np.ones(self.dim)
         self.set_weight(weight)
 
-    def set_weight(self, weight) -> None:
+    def set_weight(self, weight: Values) -> None:
         """Set the weight: a scalar or one non-negative value per residual row."""
         w = np.asarray(weight, dtype=float)
         w = np.full(self.dim, float(w)) if w.ndim == 0 else w.reshape(-1)

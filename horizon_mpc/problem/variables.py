@@ -15,7 +15,13 @@ from dataclasses import dataclass
 import casadi as cs
 import numpy as np
 
-from horizon_mpc.problem.nodes import NodeSelection, broadcast_values, check_bounds, select_nodes
+from horizon_mpc.problem.nodes import (
+    NodeSelection,
+    Values,
+    broadcast_values,
+    check_bounds,
+    select_nodes,
+)
 
 __all__ = [
     "InputVariable",
@@ -92,7 +98,7 @@ class Variable(cs.SX):
             self._values(value, n, what)  # raises the shape error
         target[:, cols] = arr
 
-    def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:
+    def set_bounds(self, lb: Values, ub: Values, nodes: NodeSelection = None) -> None:
         """Set lower and upper bounds on ``nodes`` (scalar, (dim,) or (dim, n_sel)).
 
         Raises:
@@ -104,7 +110,7 @@ class Variable(cs.SX):
         check_bounds(lo, hi, f"bounds of {self.name!r}")
         self._lb[:, cols], self._ub[:, cols] = lo, hi
 
-    def set_lower_bounds(self, lb, nodes: NodeSelection = None) -> None:
+    def set_lower_bounds(self, lb: Values, nodes: NodeSelection = None) -> None:
         """Set the lower bounds only (checked as :meth:`set_bounds` against the upper
         bounds in place)."""
         cols, n = self._columns(nodes)
@@ -112,7 +118,7 @@ class Variable(cs.SX):
         check_bounds(lo, self._ub[:, cols], f"bounds of {self.name!r}")
         self._lb[:, cols] = lo
 
-    def set_upper_bounds(self, ub, nodes: NodeSelection = None) -> None:
+    def set_upper_bounds(self, ub: Values, nodes: NodeSelection = None) -> None:
         """Set the upper bounds only (checked as :meth:`set_bounds` against the lower
         bounds in place)."""
         cols, n = self._columns(nodes)
@@ -120,7 +126,7 @@ class Variable(cs.SX):
         check_bounds(self._lb[:, cols], hi, f"bounds of {self.name!r}")
         self._ub[:, cols] = hi
 
-    def set_initial_guess(self, value, nodes: NodeSelection = None) -> None:
+    def set_initial_guess(self, value: Values, nodes: NodeSelection = None) -> None:
         """Set the initial guess (warm start) on ``nodes``."""
         cols, n = self._columns(nodes)
         self._write(self._init, cols, n, value, "initial guess")
@@ -230,7 +236,7 @@ class Parameter(Variable):
     def __init__(self, name: str, dim: int, n_nodes: int):
         super().__init__(name, dim, n_nodes + 1)
 
-    def assign(self, value, nodes: NodeSelection = None) -> None:
+    def assign(self, value: Values, nodes: NodeSelection = None) -> None:
         """Assign the parameter's value on ``nodes`` (scalar, (dim,) or (dim, n_sel))."""
         cols, n = self._columns(nodes)
         self._write(self._init, cols, n, value, "value")
@@ -240,7 +246,7 @@ class Parameter(Variable):
         """The assigned values, shape (dim, N+1) (a copy)."""
         return self._init.copy()
 
-    def set_bounds(self, lb, ub, nodes: NodeSelection = None) -> None:  # noqa: D102
+    def set_bounds(self, lb: Values, ub: Values, nodes: NodeSelection = None) -> None:  # noqa: D102
         raise TypeError(f"parameter {self.name!r} has no bounds: use assign()")
 
 
