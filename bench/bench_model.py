@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 import pinocchio as pin
 
@@ -76,9 +76,9 @@ def _states(m: RobotModel, n: int, seed: int = 0) -> dict[str, np.ndarray]:
     }
 
 
-def _compile_timed(fn: ca.Function, cache_dir: Path) -> tuple[ca.Function, float, float, int]:
+def _compile_timed(fn: cs.Function, cache_dir: Path) -> tuple[cs.Function, float, float, int]:
     """(compiled fn, cold compile s, warm load s, C size in bytes)."""
-    gen = ca.CodeGenerator("probe.c", {"with_header": False})
+    gen = cs.CodeGenerator("probe.c", {"with_header": False})
     gen.add(fn)
     c_size = len(gen.dump())
     start = time.perf_counter()
@@ -100,7 +100,7 @@ def bench_robot(name: str, contacts: list[str], cache_dir: Path) -> dict:
     s = _states(m, N_BATCH)
     # Inputs converted to DM once: numpy -> DM conversion in CasADi 3.8 costs ~50 ns per
     # element, as much as the evaluation itself; a solver keeps its data in DM (or buffers).
-    args = tuple(ca.DM(s[k]) for k in ("q", "v", "a", "f"))
+    args = tuple(cs.DM(s[k]) for k in ("q", "v", "a", "f"))
     np_args = tuple(s[k] for k in ("q", "v", "a", "f"))
     out: dict = {
         "nq": m.nq,
@@ -177,7 +177,7 @@ def main() -> None:
     results = {
         "machine": {
             "python": platform.python_version(),
-            "casadi": ca.__version__,
+            "casadi": cs.__version__,
             "pinocchio": pin.__version__,
             "cpu": platform.processor() or platform.machine(),
         },

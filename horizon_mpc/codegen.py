@@ -51,7 +51,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 
 __all__ = [
@@ -109,7 +109,7 @@ class CompileStats:
 
 
 STATS = CompileStats()
-_LOADED: dict[str, ca.Function] = {}
+_LOADED: dict[str, cs.Function] = {}
 
 
 def codegen_enabled() -> bool:
@@ -205,27 +205,27 @@ def arch_flags() -> tuple[str, ...]:
     return flags
 
 
-def _renamed(fn: ca.Function, name: str) -> ca.Function:
+def _renamed(fn: cs.Function, name: str) -> cs.Function:
     if fn.name() == name:
         return fn
     if fn.is_a("SXFunction"):
         args = fn.sx_in()
     else:
         args = fn.mx_in()
-    return ca.Function(name, args, fn.call(args), fn.name_in(), fn.name_out())
+    return cs.Function(name, args, fn.call(args), fn.name_in(), fn.name_out())
 
 
-def _key(fn: ca.Function) -> str:
+def _key(fn: cs.Function) -> str:
     h = hashlib.sha256()
-    for part in (fn.serialize(), _POLICY, " ".join(arch_flags()), CC, ca.__version__):
+    for part in (fn.serialize(), _POLICY, " ".join(arch_flags()), CC, cs.__version__):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()[:24]
 
 
 def compile_function(
-    fn: ca.Function, name: str | None = None, cache_dir: str | Path | None = None
-) -> ca.Function:
+    fn: cs.Function, name: str | None = None, cache_dir: str | Path | None = None
+) -> cs.Function:
     """Compiled twin of ``fn`` (same signature), from the cache when possible.
 
     Args:
@@ -264,14 +264,14 @@ def compile_function(
         _warn_uncompiled(f"{type(exc).__name__}: {exc}")
         return fn
     try:
-        compiled = ca.external(fn.name(), str(lib))
+        compiled = cs.external(fn.name(), str(lib))
     except RuntimeError as exc:  # not loadable after all (dlopen): one rebuild
         _log.warning("cached library %s does not load (%s): rebuilding it", lib,
                      str(exc).splitlines()[-1])
         lib.unlink(missing_ok=True)
         _build(fn, lib)
         try:
-            compiled = ca.external(fn.name(), str(lib))
+            compiled = cs.external(fn.name(), str(lib))
         except RuntimeError as again:  # e.g. a cache folder mounted noexec
             _warn_uncompiled(f"{lib.parent}: {str(again).splitlines()[-1]}")
             return fn
@@ -318,7 +318,7 @@ def library_damage(lib: Path) -> str | None:
     return None
 
 
-def compiled_library(fn: ca.Function) -> Path | None:
+def compiled_library(fn: cs.Function) -> Path | None:
     """The shared library behind ``fn`` when :func:`compile_function` returned it (in this
     process), else None. Its C entry points are CasADi's interface of generated code:
     ``<fn.name()>(arg, res, iw, w, mem)`` and ``<fn.name()>_work`` for the array sizes."""
@@ -333,10 +333,10 @@ def forget_loaded() -> None:
     _LOADED.clear()
 
 
-def _build(fn: ca.Function, lib: Path) -> None:
+def _build(fn: cs.Function, lib: Path) -> None:
     def generate(work: Path) -> list[str]:
         c_name = f"{fn.name()}.c"
-        gen = ca.CodeGenerator(c_name, {"with_header": False})
+        gen = cs.CodeGenerator(c_name, {"with_header": False})
         gen.add(fn)
         gen.generate(str(work) + os.sep)
         size = (work / c_name).stat().st_size
@@ -553,7 +553,7 @@ class BufferedFunction:
     finiteness test of all of them: ``math.isfinite(call.output_buffer.sum())``).
     """
 
-    def __init__(self, fn: ca.Function) -> None:
+    def __init__(self, fn: cs.Function) -> None:
         for kind, n, sp in (
             ("input", fn.n_in(), fn.sparsity_in),
             ("output", fn.n_out(), fn.sparsity_out),

@@ -8,7 +8,7 @@ from __future__ import annotations
 import re
 from functools import cache
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 import pinocchio as pin
 
@@ -78,7 +78,7 @@ def random_states(m: RobotModel, n: int = N_STATES, seed: int = 0) -> dict[str, 
     }
 
 
-def evaluate(fn: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
+def evaluate(fn: cs.Function, *args: np.ndarray) -> list[np.ndarray]:
     """All outputs of ``fn`` over the columns of ``args`` in one mapped call.
 
     Output k of state i is ``out[k][..., i]`` with the output's own shape in front.
@@ -89,7 +89,7 @@ def evaluate(fn: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
     outs = []
     for k, r in enumerate(res):
         shape = fn.size_out(k)
-        arr = np.asarray(ca.DM(r).full()).reshape(shape[0], n, shape[1])
+        arr = np.asarray(cs.DM(r).full()).reshape(shape[0], n, shape[1])
         outs.append(np.moveaxis(arr, 1, 2))
     return outs
 

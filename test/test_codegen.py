@@ -9,7 +9,7 @@ import textwrap
 import time
 from pathlib import Path
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 import pytest
 from model_reference import evaluate, model, random_states
@@ -24,10 +24,10 @@ def cache(tmp_path, monkeypatch):
     return tmp_path
 
 
-def _small_function() -> ca.Function:
-    x = ca.SX.sym("x", 3)
-    p = ca.SX.sym("p")
-    return ca.Function("small", [x, p], [ca.sin(x) * p, ca.sumsqr(x)], ["x", "p"], ["y", "n"])
+def _small_function() -> cs.Function:
+    x = cs.SX.sym("x", 3)
+    p = cs.SX.sym("p")
+    return cs.Function("small", [x, p], [cs.sin(x) * p, cs.sumsqr(x)], ["x", "p"], ["y", "n"])
 
 
 def test_compiled_forward_kinematics_returns_what_the_vm_does(cache):
@@ -92,9 +92,9 @@ def test_library_is_cached_on_disk_and_reused(cache):
 
 def test_changed_function_gets_a_new_library(cache):
     codegen.compile_function(_small_function())
-    x = ca.SX.sym("x", 3)
-    p = ca.SX.sym("p")
-    other = ca.Function("small", [x, p], [ca.cos(x) * p, ca.sumsqr(x)], ["x", "p"], ["y", "n"])
+    x = cs.SX.sym("x", 3)
+    p = cs.SX.sym("p")
+    other = cs.Function("small", [x, p], [cs.cos(x) * p, cs.sumsqr(x)], ["x", "p"], ["y", "n"])
     fast = codegen.compile_function(other)
     assert np.allclose(fast(np.zeros(3), 1.0)[0].full().ravel(), 1.0)
     assert len(list(cache.glob("small_*.so"))) == 2
@@ -117,9 +117,9 @@ def test_default_cache_dir_follows_xdg(monkeypatch, tmp_path):
 
 def test_compiler_errors_are_reported(cache, monkeypatch):
     monkeypatch.setattr(codegen, "CC_ARGV", ("false",))  # a "compiler" that always fails
-    x = ca.SX.sym("x")
+    x = cs.SX.sym("x")
     with pytest.raises(RuntimeError, match="compiling broken failed"):
-        codegen.compile_function(ca.Function("broken", [x], [x * 3]))
+        codegen.compile_function(cs.Function("broken", [x], [x * 3]))
 
 
 _SCRIPT = textwrap.dedent(
@@ -167,15 +167,15 @@ def test_buffered_function_matches_a_plain_call(cache):
 
 
 def test_buffered_function_rejects_sparse_outputs():
-    x = ca.SX.sym("x", 2)
-    fn = ca.Function("diag", [x], [ca.diag(x)])
+    x = cs.SX.sym("x", 2)
+    fn = cs.Function("diag", [x], [cs.diag(x)])
     with pytest.raises(ValueError, match="sparse"):
         codegen.BufferedFunction(fn)
 
 
 def test_names_that_are_not_c_identifiers_are_sanitised(cache):
-    x = ca.SX.sym("x")
-    fast = codegen.compile_function(ca.Function("f", [x], [2 * x]), name="fk_FL-foot.0")
+    x = cs.SX.sym("x")
+    fast = codegen.compile_function(cs.Function("f", [x], [2 * x]), name="fk_FL-foot.0")
     assert fast.name() == "fk_FL_foot_0"
     assert float(fast(1.5)) == 3.0
 
@@ -269,18 +269,18 @@ def test_function_names_are_c_identifiers_that_clash_with_nothing():
     long = codegen.function_name("x" * 300)
     assert len(long) <= 64 and long != codegen.function_name("x" * 299)
     cut = codegen.function_name("a" * 54 + "-b" + "c" * 20)  # '_' at the cut: no '__'
-    assert "__" not in cut and ca.Function(cut, [ca.SX.sym("x")], [1]).name() == cut
+    assert "__" not in cut and cs.Function(cut, [cs.SX.sym("x")], [1]).name() == cut
 
 
 _BIG_COMPILE = """
 import sys
-import casadi as ca
+import casadi as cs
 from horizon_mpc import codegen
-x = ca.SX.sym("x", 60)
+x = cs.SX.sym("x", 60)
 e = x
 for i in range(60):
-    e = ca.sin(e * 1.0001 + i) * ca.cos(e[::-1])
-codegen.compile_function(ca.Function("slow_to_compile", [x], [ca.jacobian(e, x)]),
+    e = cs.sin(e * 1.0001 + i) * cs.cos(e[::-1])
+codegen.compile_function(cs.Function("slow_to_compile", [x], [cs.jacobian(e, x)]),
                          cache_dir=sys.argv[1])
 """
 
@@ -363,8 +363,8 @@ def test_a_malformed_bound_is_an_error_that_names_the_variable_but_builds_go_on(
     monkeypatch.setenv("HORIZON_MPC_CACHE_MAX_MB", text)
     with pytest.raises(ValueError, match="HORIZON_MPC_CACHE_MAX_MB"):
         codegen.cache_max_bytes()
-    x = ca.SX.sym("x")
-    fn = codegen.compile_function(ca.Function("doubled", [x], [2 * x]))
+    x = cs.SX.sym("x")
+    fn = codegen.compile_function(cs.Function("doubled", [x], [2 * x]))
     assert float(fn(3.0)) == 6.0
     assert "the cache is not pruned" in caplog.text
 

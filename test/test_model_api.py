@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -105,7 +105,7 @@ def test_functions_have_named_inputs_and_outputs():
     assert m.forward_dynamics().name_in() == ["q", "v", "tau", "f"]
 
 
-@pytest.mark.parametrize("sym", [ca.SX, ca.MX])
+@pytest.mark.parametrize("sym", [cs.SX, cs.MX])
 def test_functions_accept_symbols(sym):
     m = model("go2")
     q, v = sym.sym("q", m.nq), sym.sym("v", m.nv)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -75,11 +75,11 @@ def test_analytical_derivatives_match_casadi_ad(name):
     # Other joint types (unaligned revolute, prismatic) and fixed bases, against plain AD.
     m = model(name)
     contacts = [m.frame_names[-1], m.frame_names[len(m.frame_names) // 2]]
-    q, v, a = (ca.SX.sym(x, n) for x, n in (("q", m.nq), ("v", m.nv), ("a", m.nv)))
-    f = ca.SX.sym("f", 6)
+    q, v, a = (cs.SX.sym(x, n) for x, n in (("q", m.nq), ("v", m.nv), ("a", m.nv)))
+    f = cs.SX.sym("f", 6)
     tau = m.inverse_dynamics(contacts)(q, v, a, f)
-    jq = ca.jacobian(tau, q) @ m.tangent_map()(q)
-    ad = ca.Function("ad", [q, v, a, f], [tau, jq] + [ca.jacobian(tau, x) for x in (v, a, f)])
+    jq = cs.jacobian(tau, q) @ m.tangent_map()(q)
+    ad = cs.Function("ad", [q, v, a, f], [tau, jq] + [cs.jacobian(tau, x) for x in (v, a, f)])
     s = random_states(m, n=20)
     forces = 50.0 * np.random.default_rng(5).normal(size=(6, 20))
     args = (s["q"], s["v"], s["a"], forces)
@@ -92,11 +92,11 @@ def test_casadi_ad_of_inverse_dynamics_through_integrate_matches_pinocchio():
     # What a solver does with the plain ID Function: d/d(dq) ID(integrate(q, dq), ...) at 0.
     m = model("go2")
     contacts = FEET["go2"]
-    q, dq = ca.SX.sym("q", m.nq), ca.SX.sym("dq", m.nv)
-    v, a, f = ca.SX.sym("v", m.nv), ca.SX.sym("a", m.nv), ca.SX.sym("f", 12)
+    q, dq = cs.SX.sym("q", m.nq), cs.SX.sym("dq", m.nv)
+    v, a, f = cs.SX.sym("v", m.nv), cs.SX.sym("a", m.nv), cs.SX.sym("f", 12)
     tau = m.inverse_dynamics(contacts)(m.integrate()(q, dq), v, a, f)
-    jacs = [ca.jacobian(tau, x) for x in (dq, v, a)]
-    ad = ca.Function("ad", [q, dq, v, a, f], jacs)
+    jacs = [cs.jacobian(tau, x) for x in (dq, v, a)]
+    ad = cs.Function("ad", [q, dq, v, a, f], jacs)
     s = random_states(m, n=10)
     forces = 50.0 * np.random.default_rng(6).normal(size=(12, 10))
     for i in range(10):

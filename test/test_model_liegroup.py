@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -68,8 +68,8 @@ def test_neutral_matches_pinocchio(name):
 def test_tangent_map_is_the_derivative_of_integrate_at_zero():
     m = model("centauro_wheels")
     s = random_states(m, n=5)
-    q, dq = ca.SX.sym("q", m.nq), ca.SX.sym("dq", m.nv)
-    jac = ca.Function("j", [q, dq], [ca.jacobian(m.integrate()(q, dq), dq)])
+    q, dq = cs.SX.sym("q", m.nq), cs.SX.sym("dq", m.nv)
+    jac = cs.Function("j", [q, dq], [cs.jacobian(m.integrate()(q, dq), dq)])
     for i in range(5):
         qi = s["q"][:, i]
         expected = jac(qi, np.zeros(m.nv)).full()
@@ -79,8 +79,8 @@ def test_tangent_map_is_the_derivative_of_integrate_at_zero():
 def test_difference_after_integrate_has_identity_jacobian_at_zero():
     # Costs like ||difference(q, q_ref)|| are differentiated at q = q_ref: must be finite.
     m = model("centauro_wheels")
-    q0, dq = ca.SX.sym("q", m.nq), ca.SX.sym("dq", m.nv)
+    q0, dq = cs.SX.sym("q", m.nq), cs.SX.sym("dq", m.nv)
     expr = m.difference()(q0, m.integrate()(q0, dq))
-    jac = ca.Function("j", [q0, dq], [ca.jacobian(expr, dq)])
+    jac = cs.Function("j", [q0, dq], [cs.jacobian(expr, dq)])
     for q in random_states(m, n=5)["q"].T:
         assert rel_err(jac(q, np.zeros(m.nv)).full(), np.eye(m.nv)) < 1e-12

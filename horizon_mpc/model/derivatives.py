@@ -28,7 +28,7 @@ from the moving axis cancels ``s_k^T (s_j x* Fc_K)``. For a DoF k of a strict an
 
 from __future__ import annotations
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 
 from horizon_mpc.model.joints import JointSpec
@@ -37,7 +37,7 @@ from horizon_mpc.model.spatial import Transform, cross_force, cross_motion, skew
 
 __all__ = ["inverse_dynamics_derivatives"]
 
-Vec6 = ca.SX  # (6, 1): (lin, ang) or (force, moment)
+Vec6 = cs.SX  # (6, 1): (lin, ang) or (force, moment)
 
 
 class _Inertia:
@@ -47,7 +47,7 @@ class _Inertia:
     origin: 10 numbers instead of 36, and sums of them are composite inertias.
     """
 
-    def __init__(self, mass, h: ca.SX, i_o: ca.SX) -> None:
+    def __init__(self, mass, h: cs.SX, i_o: cs.SX) -> None:
         self.mass, self.h, self.i_o = mass, h, i_o
 
     def __add__(self, other: _Inertia) -> _Inertia:
@@ -55,13 +55,13 @@ class _Inertia:
 
     def apply(self, x: Vec6) -> Vec6:
         v, w = x[0:3], x[3:6]
-        return ca.vertcat(self.mass * v - ca.cross(self.h, w), self.i_o @ w + ca.cross(self.h, v))
+        return cs.vertcat(self.mass * v - cs.cross(self.h, w), self.i_o @ w + cs.cross(self.h, v))
 
 
 class _Variation:
     """``B = ov x* oI - oI ov x`` (symmetric): ``[[0, [u]], [-[u], D]]``, D symmetric 3x3."""
 
-    def __init__(self, u: ca.SX, d: ca.SX) -> None:
+    def __init__(self, u: cs.SX, d: cs.SX) -> None:
         self.u, self.d = u, d
 
     def __add__(self, other: _Variation) -> _Variation:
@@ -69,20 +69,20 @@ class _Variation:
 
     def apply(self, x: Vec6) -> Vec6:
         xl, xa = x[0:3], x[3:6]
-        return ca.vertcat(ca.cross(self.u, xa), self.d @ xa - ca.cross(self.u, xl))
+        return cs.vertcat(cs.cross(self.u, xa), self.d @ xa - cs.cross(self.u, xl))
 
 
 def _body_inertia(s: JointSpec, o_m: Transform) -> _Inertia:
-    com = o_m.act_point(ca.SX(s.com.reshape(3, 1)))
+    com = o_m.act_point(cs.SX(s.com.reshape(3, 1)))
     rot = o_m.R
-    i_w = rot @ ca.SX(s.inertia_c) @ rot.T
-    i_o = i_w + s.mass * (ca.dot(com, com) * ca.SX.eye(3) - com @ com.T)
+    i_w = rot @ cs.SX(s.inertia_c) @ rot.T
+    i_o = i_w + s.mass * (cs.dot(com, com) * cs.SX.eye(3) - com @ com.T)
     return _Inertia(s.mass, s.mass * com, _symmetrize(i_o))
 
 
-def _symmetrize(m: ca.SX) -> ca.SX:
+def _symmetrize(m: cs.SX) -> cs.SX:
     """Reuse the upper triangle's nodes below the diagonal (halves later sums)."""
-    out = ca.SX(m.shape[0], m.shape[1])
+    out = cs.SX(m.shape[0], m.shape[1])
     for r in range(m.shape[0]):
         for c in range(r, m.shape[1]):
             out[r, c] = m[r, c]
@@ -93,44 +93,44 @@ def _symmetrize(m: ca.SX) -> ca.SX:
 def _variation(inertia: _Inertia, vel: Vec6) -> _Variation:
     v, w = vel[0:3], vel[3:6]
     h, i_o = inertia.h, inertia.i_o
-    u = ca.cross(h, w) - inertia.mass * v
+    u = cs.cross(h, w) - inertia.mass * v
     wx = skew(w)
-    d = 2 * ca.dot(v, h) * ca.SX.eye(3) - v @ h.T - h @ v.T + wx @ i_o - i_o @ wx
+    d = 2 * cs.dot(v, h) * cs.SX.eye(3) - v @ h.T - h @ v.T + wx @ i_o - i_o @ wx
     return _Variation(u, _symmetrize(d))
 
 
 def _mx(a: Vec6, b: Vec6) -> Vec6:
     """Motion cross product ``a x b``."""
-    return ca.vertcat(*cross_motion((a[0:3], a[3:6]), (b[0:3], b[3:6])))
+    return cs.vertcat(*cross_motion((a[0:3], a[3:6]), (b[0:3], b[3:6])))
 
 
 def _fx(a: Vec6, b: Vec6) -> Vec6:
     """Force cross product ``a x* b``."""
-    return ca.vertcat(*cross_force((a[0:3], a[3:6]), (b[0:3], b[3:6])))
+    return cs.vertcat(*cross_force((a[0:3], a[3:6]), (b[0:3], b[3:6])))
 
 
 def _world_columns(s: JointSpec, o_m: Transform) -> list[Vec6]:
     """World-frame motion subspace columns of joint ``s``, one 6-vector per DoF."""
     cols = []
     for lin, ang in s.subspace():
-        w = o_m.R @ ang if np.any(ang) else ca.SX.zeros(3, 1)
-        v = o_m.R @ lin if np.any(lin) else ca.SX.zeros(3, 1)
+        w = o_m.R @ ang if np.any(ang) else cs.SX.zeros(3, 1)
+        v = o_m.R @ lin if np.any(lin) else cs.SX.zeros(3, 1)
         if np.any(ang):
-            v = v + ca.cross(o_m.p, w)
-        cols.append(ca.vertcat(v, w))
+            v = v + cs.cross(o_m.p, w)
+        cols.append(cs.vertcat(v, w))
     return cols
 
 
 def inverse_dynamics_derivatives(
     specs: list[JointSpec],
     kin: TreeKinematics,
-    v: ca.SX,
-    a: ca.SX,
+    v: cs.SX,
+    a: cs.SX,
     gravity: np.ndarray,
     nv: int,
     frames: list[FrameSpec],
-    f: ca.SX,
-) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    f: cs.SX,
+) -> tuple[cs.SX, cs.SX, cs.SX, cs.SX, cs.SX]:
     """``tau, dtau_dq, dtau_dv, dtau_da, dtau_df`` (see the module docstring).
 
     Args:
@@ -138,8 +138,8 @@ def inverse_dynamics_derivatives(
         v, a: (nv,) velocity and acceleration; ``gravity``: (3,) field, e.g. (0, 0, -9.81).
         frames, f: contact frames and their stacked world forces (3 per frame).
     """
-    ov: dict[int, Vec6] = {0: ca.SX.zeros(6, 1)}
-    oa: dict[int, Vec6] = {0: ca.vertcat(-ca.SX(np.asarray(gravity, float)), ca.SX.zeros(3, 1))}
+    ov: dict[int, Vec6] = {0: cs.SX.zeros(6, 1)}
+    oa: dict[int, Vec6] = {0: cs.vertcat(-cs.SX(np.asarray(gravity, float)), cs.SX.zeros(3, 1))}
     cols: dict[int, list[Vec6]] = {}
     ic: dict[int, _Inertia] = {}
     bc: dict[int, _Variation] = {}
@@ -158,8 +158,8 @@ def inverse_dynamics_derivatives(
         h = inertia.apply(vi)
         ic[i], bc[i], hc[i] = inertia, _variation(inertia, vi), h
         fc[i] = inertia.apply(ai) + _fx(vi, h)
-    fcc: dict[int, ca.SX] = {s.index: ca.SX.zeros(3, 1) for s in specs}
-    pc: dict[int, ca.SX] = {s.index: ca.SX.zeros(3, 3) for s in specs}
+    fcc: dict[int, cs.SX] = {s.index: cs.SX.zeros(3, 1) for s in specs}
+    pc: dict[int, cs.SX] = {s.index: cs.SX.zeros(3, 3) for s in specs}
     points = []
     for c, fr in enumerate(frames):
         fk = f[3 * c : 3 * c + 3]
@@ -168,9 +168,9 @@ def inverse_dynamics_derivatives(
         j = fr.parent
         if j == 0:  # a frame fixed to the world: its force does not enter the dynamics
             continue
-        fc[j] = fc[j] - ca.vertcat(fk, ca.cross(pt, fk))
+        fc[j] = fc[j] - cs.vertcat(fk, cs.cross(pt, fk))
         fcc[j] = fcc[j] + fk
-        pc[j] = pc[j] + ca.dot(pt, fk) * ca.SX.eye(3) - fk @ pt.T
+        pc[j] = pc[j] + cs.dot(pt, fk) * cs.SX.eye(3) - fk @ pt.T
     for s in reversed(specs):  # composites over subtrees
         i, p = s.index, s.parent
         if p > 0:
@@ -178,21 +178,21 @@ def inverse_dynamics_derivatives(
             fc[p], fcc[p], pc[p] = fc[p] + fc[i], fcc[p] + fcc[i], pc[p] + pc[i]
 
     dofs = [(s, k, col) for s in specs for k, col in enumerate(cols[s.index])]
-    tau = ca.SX.zeros(nv, 1)
+    tau = cs.SX.zeros(nv, 1)
     alpha, beta, gamma = {}, {}, {}
     for s, k, col in dofs:
         i, r = s.index, s.idx_v + k
-        tau[r] = ca.dot(col, fc[i])
+        tau[r] = cs.dot(col, fc[i])
         alpha[r] = ic[i].apply(col)
         beta[r] = bc[i].apply(col) - _fx(col, hc[i])
-        gamma[r] = ca.cross(fcc[i], col[0:3]) + pc[i].T @ col[3:6]
+        gamma[r] = cs.cross(fcc[i], col[0:3]) + pc[i].T @ col[3:6]
 
     subtree: dict[int, list[int]] = {s.index: [] for s in specs}  # DoF rows, joint included
     for s in reversed(specs):
         subtree[s.index] = list(range(s.idx_v, s.idx_v + s.nv)) + subtree[s.index]
         if s.parent > 0:
             subtree[s.parent] = subtree[s.parent] + subtree[s.index]
-    dq, dv, da = ca.SX.zeros(nv, nv), ca.SX.zeros(nv, nv), ca.SX.zeros(nv, nv)
+    dq, dv, da = cs.SX.zeros(nv, nv), cs.SX.zeros(nv, nv), cs.SX.zeros(nv, nv)
     for s, k, col in dofs:
         i, p, c = s.index, s.parent, s.idx_v + k
         dvel = _mx(ov[p], col)
@@ -201,9 +201,9 @@ def inverse_dynamics_derivatives(
         psi = _mx(col, oa[p]) + _mx(dvel, ov[p])
         omega = col[3:6]
         for r in subtree[i]:
-            dq[r, c] = -ca.dot(alpha[r], psi) + ca.dot(beta[r], dvel) + ca.dot(gamma[r], omega)
-            dv[r, c] = ca.dot(alpha[r], nu) + ca.dot(beta[r], col)
-            da[r, c] = ca.dot(alpha[r], col)
+            dq[r, c] = -cs.dot(alpha[r], psi) + cs.dot(beta[r], dvel) + cs.dot(gamma[r], omega)
+            dv[r, c] = cs.dot(alpha[r], nu) + cs.dot(beta[r], col)
+            da[r, c] = cs.dot(alpha[r], col)
             da[c, r] = da[r, c]  # M is symmetric: the ancestors' rows come for free
         if p == 0:
             continue
@@ -212,7 +212,7 @@ def inverse_dynamics_derivatives(
             - ic[i].apply(psi)
             + _fx(dvel, hc[i])
             + bc[i].apply(dvel)
-            + ca.vertcat(ca.cross(omega, fcc[i]), pc[i] @ omega)
+            + cs.vertcat(cs.cross(omega, fcc[i]), pc[i] @ omega)
         )
         gv = ic[i].apply(nu) + bc[i].apply(col) + _fx(col, hc[i])
         anc = p
@@ -220,16 +220,16 @@ def inverse_dynamics_derivatives(
             sa = specs[anc - 1]
             for ka, col_a in enumerate(cols[anc]):
                 r = sa.idx_v + ka
-                dq[r, c] = ca.dot(col_a, gq)
-                dv[r, c] = ca.dot(col_a, gv)
+                dq[r, c] = cs.dot(col_a, gq)
+                dv[r, c] = cs.dot(col_a, gv)
             anc = sa.parent
-    df = ca.SX.zeros(nv, 3 * len(frames))
+    df = cs.SX.zeros(nv, 3 * len(frames))
     for c, fr in enumerate(frames):
         anc = fr.parent
         while anc > 0:
             sa = specs[anc - 1]
             for ka, col_a in enumerate(cols[anc]):
-                row = -(col_a[0:3] + ca.cross(col_a[3:6], points[c]))
+                row = -(col_a[0:3] + cs.cross(col_a[3:6], points[c]))
                 df[sa.idx_v + ka, 3 * c : 3 * c + 3] = row.T
             anc = sa.parent
     return tau, dq, dv, da, df

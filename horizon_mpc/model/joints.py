@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 import pinocchio as pin
 
@@ -61,22 +61,22 @@ class JointSpec:
         """Constant ``parentMjoint`` (joint placement of the URDF)."""
         return Transform.from_numeric(self.placement_R, self.placement_p)
 
-    def joint_transform(self, q: ca.SX) -> Transform:
+    def joint_transform(self, q: cs.SX) -> Transform:
         """Joint motion ``Mj(q)`` (the part of ``parentMchild`` that depends on q).
 
         Args:
             q: full configuration (nq,); this joint reads ``q[idx_q : idx_q + nq]``.
         """
         qj = q[self.idx_q : self.idx_q + self.nq]
-        zero = ca.SX.zeros(3, 1)
+        zero = cs.SX.zeros(3, 1)
         if self.kind == _FREE_FLYER:
             return Transform(quat_to_rot(qj[3:7]), qj[0:3])
         if self.kind == _REVOLUTE:
-            return Transform(axis_angle_rot(self.axis, ca.cos(qj[0]), ca.sin(qj[0])), zero)
+            return Transform(axis_angle_rot(self.axis, cs.cos(qj[0]), cs.sin(qj[0])), zero)
         if self.kind == _CONTINUOUS:
             # Pinocchio uses (cos, sin) as stored, without normalising them.
             return Transform(axis_angle_rot(self.axis, qj[0], qj[1]), zero)
-        return Transform(ca.SX.eye(3), ca.SX(self.axis.reshape(3, 1)) * qj[0])
+        return Transform(cs.SX.eye(3), cs.SX(self.axis.reshape(3, 1)) * qj[0])
 
     def subspace(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Columns of the motion subspace S as (lin, ang) numeric pairs, one per DoF."""
@@ -88,13 +88,13 @@ class JointSpec:
             return [(self.axis, z)]
         return [(z, self.axis)]
 
-    def joint_velocity(self, v: ca.SX) -> tuple[ca.SX, ca.SX]:
+    def joint_velocity(self, v: cs.SX) -> tuple[cs.SX, cs.SX]:
         """Spatial joint velocity ``S vj`` as (lin, ang) SX 3-vectors."""
         vj = v[self.idx_v : self.idx_v + self.nv]
         if self.kind == _FREE_FLYER:
             return vj[0:3], vj[3:6]
-        axis = ca.SX(self.axis.reshape(3, 1)) * vj[0]
-        zero = ca.SX.zeros(3, 1)
+        axis = cs.SX(self.axis.reshape(3, 1)) * vj[0]
+        zero = cs.SX.zeros(3, 1)
         return (axis, zero) if self.kind == _PRISMATIC else (zero, axis)
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 import pinocchio as pin
 
@@ -64,7 +64,7 @@ def frame_specs(model: pin.Model) -> list[FrameSpec]:
 
 
 def _zero_motion() -> Motion:
-    return ca.SX.zeros(3, 1), ca.SX.zeros(3, 1)
+    return cs.SX.zeros(3, 1), cs.SX.zeros(3, 1)
 
 
 class TreeKinematics:
@@ -78,7 +78,7 @@ class TreeKinematics:
     """
 
     def __init__(
-        self, specs: list[JointSpec], q: ca.SX, v: ca.SX | None = None, a: ca.SX | None = None
+        self, specs: list[JointSpec], q: cs.SX, v: cs.SX | None = None, a: cs.SX | None = None
     ) -> None:
         self.specs = specs
         self.li_M: dict[int, Transform] = {}
@@ -118,7 +118,7 @@ def _compose_placement(s: JointSpec, mj: Transform) -> Transform:
     if np.array_equal(s.placement_R, np.eye(3)):
         if not np.any(s.placement_p):
             return mj
-        return Transform(mj.R, ca.SX(s.placement_p.reshape(3, 1)) + mj.p)
+        return Transform(mj.R, cs.SX(s.placement_p.reshape(3, 1)) + mj.p)
     return s.placement * mj
 
 
@@ -151,25 +151,25 @@ def frame_acceleration(kin: TreeKinematics, frame: FrameSpec, ref: str) -> Motio
     """
     vel = frame_velocity(kin, frame, ref)
     acc = _express(kin, frame, kin.acc[frame.parent], ref)
-    return acc[0] + ca.cross(vel[1], vel[0]), acc[1]
+    return acc[0] + cs.cross(vel[1], vel[0]), acc[1]
 
 
-def frame_jacobian(kin: TreeKinematics, frame: FrameSpec, ref: str, nv: int) -> ca.SX:
+def frame_jacobian(kin: TreeKinematics, frame: FrameSpec, ref: str, nv: int) -> cs.SX:
     """Frame Jacobian (6 x nv), rows (lin, ang), such that ``J v`` = frame velocity in ``ref``."""
-    jac = ca.SX.zeros(6, nv)
+    jac = cs.SX.zeros(6, nv)
     o_f = frame_placement(kin, frame)
     for j in kin.support(frame.parent):
         s = kin.specs[j - 1]
         o_j = kin.o_M[j]
         for k, (lin, ang) in enumerate(s.subspace()):
             # Column in world axes, taken at the frame origin (LOCAL_WORLD_ALIGNED).
-            w = o_j.R @ ang if np.any(ang) else ca.SX.zeros(3, 1)
-            vlin = o_j.R @ lin if np.any(lin) else ca.SX.zeros(3, 1)
+            w = o_j.R @ ang if np.any(ang) else cs.SX.zeros(3, 1)
+            vlin = o_j.R @ lin if np.any(lin) else cs.SX.zeros(3, 1)
             if np.any(ang):
                 if ref == WORLD:
-                    vlin = vlin + ca.cross(o_j.p, w)
+                    vlin = vlin + cs.cross(o_j.p, w)
                 else:
-                    vlin = vlin + ca.cross(o_j.p - o_f.p, w)
+                    vlin = vlin + cs.cross(o_j.p - o_f.p, w)
             if ref == LOCAL:
                 vlin, w = o_f.R.T @ vlin, o_f.R.T @ w
             jac[0:3, s.idx_v + k] = vlin

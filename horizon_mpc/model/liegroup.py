@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 
 from horizon_mpc.model.joints import JointSpec
@@ -24,11 +24,11 @@ __all__ = ["integrate", "difference", "neutral", "quat_multiply", "tangent_map"]
 _SMALL2 = 1e-6  # squared angle below which Taylor expansions are used (error < 1e-19)
 
 
-def quat_multiply(q1: ca.SX, q2: ca.SX) -> ca.SX:
+def quat_multiply(q1: cs.SX, q2: cs.SX) -> cs.SX:
     """Hamilton product ``q1 * q2`` of quaternions stored (x, y, z, w)."""
     x1, y1, z1, w1 = q1[0], q1[1], q1[2], q1[3]
     x2, y2, z2, w2 = q2[0], q2[1], q2[2], q2[3]
-    return ca.vertcat(
+    return cs.vertcat(
         w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
         w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
         w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
@@ -36,7 +36,7 @@ def quat_multiply(q1: ca.SX, q2: ca.SX) -> ca.SX:
     )
 
 
-def _series(t2: ca.SX, exact: Callable[[ca.SX], ca.SX], coeffs: tuple) -> ca.SX:
+def _series(t2: cs.SX, exact: Callable[[cs.SX], cs.SX], coeffs: tuple) -> cs.SX:
     """``exact(t2)`` for ``t2 >= _SMALL2``, else the polynomial ``sum c_k t2^k``.
 
     ``exact`` is evaluated at a safe argument inside the Taylor region: SX differentiates
@@ -46,41 +46,41 @@ def _series(t2: ca.SX, exact: Callable[[ca.SX], ca.SX], coeffs: tuple) -> ca.SX:
     for c in reversed(coeffs[:-1]):
         poly = c + t2 * poly
     small = t2 < _SMALL2
-    return ca.if_else(small, poly, exact(ca.if_else(small, 1.0, t2)))
+    return cs.if_else(small, poly, exact(cs.if_else(small, 1.0, t2)))
 
 
-def _se3_integrate(q: ca.SX, v: ca.SX) -> ca.SX:
+def _se3_integrate(q: cs.SX, v: cs.SX) -> cs.SX:
     p, quat = q[0:3], q[3:7]
     lin, w = v[0:3], v[3:6]
-    t2 = ca.dot(w, w)
+    t2 = cs.dot(w, w)
     # exp6 translation: V(w) lin, V = I + b [w] + c [w]^2
-    b = _series(t2, lambda x: (1 - ca.cos(ca.sqrt(x))) / x, (1 / 2, -1 / 24, 1 / 720))
+    b = _series(t2, lambda x: (1 - cs.cos(cs.sqrt(x))) / x, (1 / 2, -1 / 24, 1 / 720))
     c = _series(
         t2,
-        lambda x: (ca.sqrt(x) - ca.sin(ca.sqrt(x))) / (x * ca.sqrt(x)),
+        lambda x: (cs.sqrt(x) - cs.sin(cs.sqrt(x))) / (x * cs.sqrt(x)),
         (1 / 6, -1 / 120, 1 / 5040),
     )
-    wl = ca.cross(w, lin)
-    trans = lin + b * wl + c * ca.cross(w, wl)
-    half = _series(t2, lambda x: ca.sin(ca.sqrt(x) / 2) / ca.sqrt(x), (1 / 2, -1 / 48, 1 / 3840))
-    cos_half = _series(t2, lambda x: ca.cos(ca.sqrt(x) / 2), (1, -1 / 8, 1 / 384))
-    dquat = ca.vertcat(half * w, cos_half)
+    wl = cs.cross(w, lin)
+    trans = lin + b * wl + c * cs.cross(w, wl)
+    half = _series(t2, lambda x: cs.sin(cs.sqrt(x) / 2) / cs.sqrt(x), (1 / 2, -1 / 48, 1 / 3840))
+    cos_half = _series(t2, lambda x: cs.cos(cs.sqrt(x) / 2), (1, -1 / 8, 1 / 384))
+    dquat = cs.vertcat(half * w, cos_half)
     quat1 = quat_multiply(quat, dquat)
     # Pinocchio re-normalises to first order after each step: keeps |quat| = 1 over time.
-    quat1 = quat1 * (3 - ca.dot(quat1, quat1)) / 2
-    return ca.vertcat(p + quat_to_rot(quat) @ trans, quat1)
+    quat1 = quat1 * (3 - cs.dot(quat1, quat1)) / 2
+    return cs.vertcat(p + quat_to_rot(quat) @ trans, quat1)
 
 
-def _se3_difference(q0: ca.SX, q1: ca.SX) -> ca.SX:
-    conj0 = ca.vertcat(-q0[3:6], q0[6])
+def _se3_difference(q0: cs.SX, q1: cs.SX) -> cs.SX:
+    conj0 = cs.vertcat(-q0[3:6], q0[6])
     dq = quat_multiply(conj0, q1[3:7])
-    sign = ca.if_else(dq[3] < 0, -1, 1)  # shortest rotation
+    sign = cs.if_else(dq[3] < 0, -1, 1)  # shortest rotation
     vec, cw = sign * dq[0:3], sign * dq[3]
-    n2 = ca.dot(vec, vec)  # sin(theta / 2)^2
+    n2 = cs.dot(vec, vec)  # sin(theta / 2)^2
     # theta / n, with atan(x)/x = 1 - x^2/3 + x^4/5 for x = n / cw
     ratio = _series(
         n2,
-        lambda x: 2 * ca.atan2(ca.sqrt(x), cw) / ca.sqrt(x),
+        lambda x: 2 * cs.atan2(cs.sqrt(x), cw) / cs.sqrt(x),
         (2 / cw, -2 / (3 * cw**3), 2 / (5 * cw**5)),
     )
     w = ratio * vec
@@ -88,18 +88,18 @@ def _se3_difference(q0: ca.SX, q1: ca.SX) -> ca.SX:
     # in terms of n2: t = 2 atan2(n, cw) and t^2 = ratio^2 n2.
     alpha = _series(n2, lambda x: _alpha(x, cw), (1 / 12, 1 / 180, 1 / 420))
     trans = quat_to_rot(q0[3:7]).T @ (q1[0:3] - q0[0:3])
-    wt = ca.cross(w, trans)
-    lin = trans - wt / 2 + alpha * ca.cross(w, wt)
-    return ca.vertcat(lin, w)
+    wt = cs.cross(w, trans)
+    lin = trans - wt / 2 + alpha * cs.cross(w, wt)
+    return cs.vertcat(lin, w)
 
 
-def _alpha(n2: ca.SX, cw: ca.SX) -> ca.SX:
-    n = ca.sqrt(n2)
-    theta = 2 * ca.atan2(n, cw)
+def _alpha(n2: cs.SX, cw: cs.SX) -> cs.SX:
+    n = cs.sqrt(n2)
+    theta = 2 * cs.atan2(n, cw)
     return (1 - theta / 2 * cw / n) / theta**2
 
 
-def integrate(specs: list[JointSpec], q: ca.SX, dq: ca.SX, nq: int) -> ca.SX:
+def integrate(specs: list[JointSpec], q: cs.SX, dq: cs.SX, nq: int) -> cs.SX:
     """``q (+) dq`` (nq,), with dq (nv,) in the tangent space (see module docstring)."""
     out = [None] * nq
     for s in specs:
@@ -108,17 +108,17 @@ def integrate(specs: list[JointSpec], q: ca.SX, dq: ca.SX, nq: int) -> ca.SX:
         if s.kind == "free_flyer":
             res = _se3_integrate(qs, vs)
         elif s.kind == "continuous":
-            c, sn = ca.cos(vs[0]), ca.sin(vs[0])
-            res = ca.vertcat(c * qs[0] - sn * qs[1], sn * qs[0] + c * qs[1])
-            res = res * (3 - ca.dot(res, res)) / 2
+            c, sn = cs.cos(vs[0]), cs.sin(vs[0])
+            res = cs.vertcat(c * qs[0] - sn * qs[1], sn * qs[0] + c * qs[1])
+            res = res * (3 - cs.dot(res, res)) / 2
         else:
             res = qs + vs
         for k in range(s.nq):
             out[s.idx_q + k] = res[k]
-    return ca.vertcat(*out)
+    return cs.vertcat(*out)
 
 
-def difference(specs: list[JointSpec], q0: ca.SX, q1: ca.SX, nv: int) -> ca.SX:
+def difference(specs: list[JointSpec], q0: cs.SX, q1: cs.SX, nv: int) -> cs.SX:
     """``q1 (-) q0`` (nv,): the tangent vector such that ``integrate(q0, dq) = q1``."""
     out = [None] * nv
     for s in specs:
@@ -127,17 +127,17 @@ def difference(specs: list[JointSpec], q0: ca.SX, q1: ca.SX, nv: int) -> ca.SX:
         if s.kind == "free_flyer":
             res = _se3_difference(a, b)
         elif s.kind == "continuous":
-            res = ca.atan2(a[0] * b[1] - a[1] * b[0], a[0] * b[0] + a[1] * b[1])
+            res = cs.atan2(a[0] * b[1] - a[1] * b[0], a[0] * b[0] + a[1] * b[1])
         else:
             res = b - a
         for k in range(s.nv):
             out[s.idx_v + k] = res[k]
-    return ca.vertcat(*out)
+    return cs.vertcat(*out)
 
 
-def tangent_map(specs: list[JointSpec], q: ca.SX, nq: int, nv: int) -> ca.SX:
+def tangent_map(specs: list[JointSpec], q: cs.SX, nq: int, nv: int) -> cs.SX:
     """``d integrate(q, dq) / d dq`` at ``dq = 0`` (nq x nv)."""
-    t = ca.SX.zeros(nq, nv)
+    t = cs.SX.zeros(nq, nv)
     for s in specs:
         iq, iv = s.idx_q, s.idx_v
         if s.kind == "free_flyer":
@@ -145,11 +145,11 @@ def tangent_map(specs: list[JointSpec], q: ca.SX, nq: int, nv: int) -> ca.SX:
             t[iq : iq + 3, iv : iv + 3] = quat_to_rot(quat)
             x, y, z, w = quat[0], quat[1], quat[2], quat[3]
             # d(quat * [w/2, 1]) / dw
-            t[iq + 3 : iq + 7, iv + 3 : iv + 6] = 0.5 * ca.vertcat(
-                ca.horzcat(w, -z, y),
-                ca.horzcat(z, w, -x),
-                ca.horzcat(-y, x, w),
-                ca.horzcat(-x, -y, -z),
+            t[iq + 3 : iq + 7, iv + 3 : iv + 6] = 0.5 * cs.vertcat(
+                cs.horzcat(w, -z, y),
+                cs.horzcat(z, w, -x),
+                cs.horzcat(-y, x, w),
+                cs.horzcat(-x, -y, -z),
             )
         elif s.kind == "continuous":
             t[iq, iv] = -q[iq + 1]

@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 import pinocchio as pin
 
@@ -36,7 +36,7 @@ if TYPE_CHECKING:
 
 __all__ = ["RobotModel", "UnknownNameError"]
 
-_log = logging.getLogger(__name__)
+log = logging.getLogger(__name__)
 
 #: example-robot-data robots that are bolted to the ground
 FIXED_BASE_ROBOTS = frozenset({"ur5", "panda"})
@@ -109,11 +109,11 @@ class RobotModel(SymbolicFunctions):
         self._gravity = np.array(pin_model.gravity.linear)
         self._srdf = Path(srdf) if srdf is not None else None
         self._states: dict[str, dict[str, list[float]]] | None = None
-        self._q = ca.SX.sym("q", self.nq)
-        self._v = ca.SX.sym("v", self.nv)
-        self._a = ca.SX.sym("a", self.nv)
+        self._q = cs.SX.sym("q", self.nq)
+        self._v = cs.SX.sym("v", self.nv)
+        self._a = cs.SX.sym("a", self.nv)
         self._kin: dict[tuple[str, str], TreeKinematics] = {}
-        self._functions: dict[tuple, ca.Function] = {}
+        self._functions: dict[tuple, cs.Function] = {}
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -197,7 +197,7 @@ class RobotModel(SymbolicFunctions):
         for joint, values in states[name].items():
             s = by_name.get(joint)
             if s is None:
-                _log.warning("SRDF state %r: joint %r is not in the model", name, joint)
+                log.warning("SRDF state %r: joint %r is not in the model", name, joint)
             elif s.kind == "free_flyer":
                 if with_base and len(values) == 7:
                     q[s.idx_q : s.idx_q + 7] = values
@@ -242,13 +242,13 @@ class RobotModel(SymbolicFunctions):
         """Cached symbolic forward pass; ``vel``/``acc`` are 'sym', 'zero' or 'none'."""
         key = (vel, acc)
         if key not in self._kin:
-            pick = {"sym": None, "zero": ca.SX.zeros(self.nv, 1), "none": None}
+            pick = {"sym": None, "zero": cs.SX.zeros(self.nv, 1), "none": None}
             v = self._v if vel == "sym" else pick[vel]
             a = self._a if acc == "sym" else pick[acc]
             self._kin[key] = TreeKinematics(self._specs, self._q, v, a)
         return self._kin[key]
 
-    def _cached(self, key: tuple, build: Callable[[], ca.Function]) -> ca.Function:
+    def _cached(self, key: tuple, build: Callable[[], cs.Function]) -> cs.Function:
         fn = self._functions.get(key)
         if fn is None:
             fn = build()
@@ -263,7 +263,7 @@ class RobotModel(SymbolicFunctions):
             self.frame_id(c)
         return names
 
-    def compile(self, fn: ca.Function, name: str | None = None) -> ca.Function:
+    def compile(self, fn: cs.Function, name: str | None = None) -> cs.Function:
         """Compiled twin of ``fn`` (same signature); see :mod:`horizon_mpc.codegen`."""
         return codegen.compile_function(fn, name=name)
 

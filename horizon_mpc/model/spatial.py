@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 
 __all__ = [
@@ -35,26 +35,26 @@ __all__ = [
     "transform_inertia_to_parent",
 ]
 
-Vec = ca.SX | np.ndarray
+Vec = cs.SX | np.ndarray
 Motion = tuple  # (lin (3,), ang (3,))
 Force = tuple  # (f (3,), n (3,))
 
 
-def _sx(x) -> ca.SX:
-    return x if isinstance(x, ca.SX) else ca.SX(np.asarray(x, dtype=float))
+def _sx(x) -> cs.SX:
+    return x if isinstance(x, cs.SX) else cs.SX(np.asarray(x, dtype=float))
 
 
-def skew(v: Vec) -> ca.SX:
+def skew(v: Vec) -> cs.SX:
     """Cross-product matrix ``[v]`` (3x3) with ``[v] w = v x w``."""
     v = _sx(v)
-    return ca.vertcat(
-        ca.horzcat(0, -v[2], v[1]),
-        ca.horzcat(v[2], 0, -v[0]),
-        ca.horzcat(-v[1], v[0], 0),
+    return cs.vertcat(
+        cs.horzcat(0, -v[2], v[1]),
+        cs.horzcat(v[2], 0, -v[0]),
+        cs.horzcat(-v[1], v[0], 0),
     )
 
 
-def quat_to_rot(quat: Vec) -> ca.SX:
+def quat_to_rot(quat: Vec) -> cs.SX:
     """Rotation matrix (3x3) of the quaternion ``quat = (x, y, z, w)``.
 
     Uses the same polynomial as Eigen's ``toRotationMatrix`` (no normalisation), so that values
@@ -65,62 +65,62 @@ def quat_to_rot(quat: Vec) -> ca.SX:
     twx, twy, twz = tx * w, ty * w, tz * w
     txx, txy, txz = tx * x, ty * x, tz * x
     tyy, tyz, tzz = ty * y, tz * y, tz * z
-    return ca.vertcat(
-        ca.horzcat(1 - (tyy + tzz), txy - twz, txz + twy),
-        ca.horzcat(txy + twz, 1 - (txx + tzz), tyz - twx),
-        ca.horzcat(txz - twy, tyz + twx, 1 - (txx + tyy)),
+    return cs.vertcat(
+        cs.horzcat(1 - (tyy + tzz), txy - twz, txz + twy),
+        cs.horzcat(txy + twz, 1 - (txx + tzz), tyz - twx),
+        cs.horzcat(txz - twy, tyz + twx, 1 - (txx + tyy)),
     )
 
 
-def axis_angle_rot(axis: np.ndarray, c, s) -> ca.SX:
+def axis_angle_rot(axis: np.ndarray, c, s) -> cs.SX:
     """Rotation (3x3) about the unit ``axis`` (numeric, (3,)) given ``c = cos``, ``s = sin``.
 
     Coordinate axes give the familiar sparse matrices (SX removes the zero terms).
     """
     a = np.asarray(axis, dtype=float).reshape(3)
     aat = np.outer(a, a)
-    return c * ca.SX(np.eye(3) - aat) + s * skew(a) + ca.SX(aat)
+    return c * cs.SX(np.eye(3) - aat) + s * skew(a) + cs.SX(aat)
 
 
 @dataclass(frozen=True)
 class Transform:
     """Rigid transform ``aMb = (R, p)``; see the module docstring for the convention."""
 
-    R: ca.SX  # (3, 3)
-    p: ca.SX  # (3, 1)
+    R: cs.SX  # (3, 3)
+    p: cs.SX  # (3, 1)
 
     @staticmethod
     def identity() -> Transform:
-        return Transform(ca.SX.eye(3), ca.SX.zeros(3, 1))
+        return Transform(cs.SX.eye(3), cs.SX.zeros(3, 1))
 
     @staticmethod
     def from_numeric(R: np.ndarray, p: np.ndarray) -> Transform:
-        return Transform(ca.SX(np.asarray(R, float)), ca.SX(np.asarray(p, float).reshape(3, 1)))
+        return Transform(cs.SX(np.asarray(R, float)), cs.SX(np.asarray(p, float).reshape(3, 1)))
 
     def __mul__(self, other: Transform) -> Transform:
         """Composition ``aMc = aMb * bMc``."""
         return Transform(self.R @ other.R, self.p + self.R @ other.p)
 
-    def act_point(self, x: Vec) -> ca.SX:
+    def act_point(self, x: Vec) -> cs.SX:
         """Point given in b, expressed in a: ``R x + p``."""
         return self.p + self.R @ x
 
     def act_motion(self, m: Motion) -> Motion:
         """Motion expressed in b -> the same motion expressed in a."""
         ang = self.R @ m[1]
-        return self.R @ m[0] + ca.cross(self.p, ang), ang
+        return self.R @ m[0] + cs.cross(self.p, ang), ang
 
     def act_inv_motion(self, m: Motion) -> Motion:
         """Motion expressed in a -> the same motion expressed in b."""
-        return self.R.T @ (m[0] - ca.cross(self.p, m[1])), self.R.T @ m[1]
+        return self.R.T @ (m[0] - cs.cross(self.p, m[1])), self.R.T @ m[1]
 
     def act_force(self, f: Force) -> Force:
         """Force expressed in b -> the same force expressed in a; ``f``'s parts may be
         (3, k) blocks of k forces (a multi-DoF joint's columns in the CRBA)."""
         lin = self.R @ f[0]
         if lin.size2() == 1:
-            return lin, self.R @ f[1] + ca.cross(self.p, lin)
-        moment = ca.horzcat(*(ca.cross(self.p, lin[:, c]) for c in range(lin.size2())))
+            return lin, self.R @ f[1] + cs.cross(self.p, lin)
+        moment = cs.horzcat(*(cs.cross(self.p, lin[:, c]) for c in range(lin.size2())))
         return lin, self.R @ f[1] + moment
 
 
@@ -128,21 +128,21 @@ def cross_motion(m1: Motion, m2: Motion) -> Motion:
     """Spatial motion cross product ``m1 x m2``."""
     v1, w1 = m1
     v2, w2 = m2
-    return ca.cross(w1, v2) + ca.cross(v1, w2), ca.cross(w1, w2)
+    return cs.cross(w1, v2) + cs.cross(v1, w2), cs.cross(w1, w2)
 
 
 def cross_force(m: Motion, f: Force) -> Force:
     """Spatial force cross product ``m x* f``."""
     v, w = m
     lin, ang = f
-    return ca.cross(w, lin), ca.cross(w, ang) + ca.cross(v, lin)
+    return cs.cross(w, lin), cs.cross(w, ang) + cs.cross(v, lin)
 
 
 def inertia_apply(mass: float, com: np.ndarray, inertia_c: np.ndarray, m: Motion) -> Force:
     """Momentum ``I * m`` of a rigid body with constant inertia ``(mass, com, inertia_c)``."""
     v, w = m
-    lin = mass * (v - ca.cross(_sx(com), w))
-    return lin, _sx(inertia_c) @ w + ca.cross(_sx(com), lin)
+    lin = mass * (v - cs.cross(_sx(com), w))
+    return lin, _sx(inertia_c) @ w + cs.cross(_sx(com), lin)
 
 
 def inertia_matrix(mass: float, com: np.ndarray, inertia_c: np.ndarray) -> tuple:
@@ -152,7 +152,7 @@ def inertia_matrix(mass: float, com: np.ndarray, inertia_c: np.ndarray) -> tuple
     a = mass * np.eye(3)
     b = -mass * cx
     cc = np.asarray(inertia_c, float) - mass * cx @ cx
-    return ca.SX(a), ca.SX(b), ca.SX(cc)
+    return cs.SX(a), cs.SX(b), cs.SX(cc)
 
 
 def transform_inertia_to_parent(tr: Transform, blocks: tuple) -> tuple:

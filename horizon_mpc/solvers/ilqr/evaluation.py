@@ -20,7 +20,7 @@ from __future__ import annotations
 import ctypes
 import logging
 
-import casadi as ca
+import casadi as cs
 import numpy as np
 
 from horizon_mpc import codegen
@@ -42,7 +42,7 @@ class GeneratedFunction(ctypes.Structure):
                 ("iw", _p), ("w", _p)]
 
     @classmethod
-    def bind(cls, fn: ca.Function) -> GeneratedFunction:
+    def bind(cls, fn: cs.Function) -> GeneratedFunction:
         """The entry point of ``fn``, a Function from ``codegen.compile_function``.
 
         Raises:
@@ -101,7 +101,7 @@ class _Quadratise(ctypes.Structure):  # quadratise_data of evaluation.c
                 ("buffer", _p), ("n_buffer", ctypes.c_size_t)]
 
 
-def _output_views(buffer: np.ndarray, fns: tuple[ca.Function, ...]) -> list[list[np.ndarray]]:
+def _output_views(buffer: np.ndarray, fns: tuple[cs.Function, ...]) -> list[list[np.ndarray]]:
     """The outputs of ``fns`` as consecutive blocks of ``buffer``, each shaped as the
     Function's output (column-major, as ``BufferedFunction.outputs``)."""
     views, pos = [], 0
@@ -141,9 +141,9 @@ class CompiledEvaluation:
     solver reads the problem) and :meth:`set_initial_state`.
     """
 
-    def __init__(self, values: ca.Function, values_term: ca.Function,
-                 difference: ca.Function, quadratise: ca.Function,
-                 quadratise_term: ca.Function, sizes: dict[str, int],
+    def __init__(self, values: cs.Function, values_term: cs.Function,
+                 difference: cs.Function, quadratise: cs.Function,
+                 quadratise_term: cs.Function, sizes: dict[str, int],
                  al: AugmentedLagrangian, alN: AugmentedLagrangian):
         self._lib = _bind_library()
         self._fns = tuple(GeneratedFunction.bind(f) for f in (values, values_term, difference))
@@ -195,7 +195,7 @@ class CompiledEvaluation:
             q.out_term[j] = a.ctypes.data
         q.buffer, q.n_buffer = self.quadratisation_buffer.ctypes.data, n_out
         q.term = GeneratedFunction.bind(quadratise_term)
-        self._stage_fns: dict[int, tuple[ca.Function, GeneratedFunction]] = {}
+        self._stage_fns: dict[int, tuple[cs.Function, GeneratedFunction]] = {}
         self._stage_shapes = [quadratise.size_out(i) for i in range(9)]
         self.set_stage_quadratisation(quadratise)
         self._quad_ptr = ctypes.pointer(q)
@@ -214,7 +214,7 @@ class CompiledEvaluation:
                      err)
             return None
 
-    def set_stage_quadratisation(self, fn: ca.Function) -> None:
+    def set_stage_quadratisation(self, fn: cs.Function) -> None:
         """Quadratise with this stage function from now on (the solver's lean or full one:
         the same inputs and output shapes)."""
         entry = self._stage_fns.get(id(fn))  # (fn, its entry): the key stays valid
