@@ -549,7 +549,7 @@ def test_an_active_input_bound_is_never_called_converged_short_of_it(input_bound
         assert np.max(0.5 - u[u > 0.45]) <= ilqr.opts["tol_complementarity"]
         assert ilqr.stats.cost == pytest.approx(ipopt.stats.cost, rel=1e-5)
     else:
-        assert ilqr.stats.status == "max_iter"
+        assert ilqr.stats.status == "max_iter reached"
 
 
 def _two_inputs_alike(coefficient: float, integrator: str = "rk4"):

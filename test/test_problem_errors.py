@@ -565,3 +565,21 @@ def test_a_dt_parameter_that_is_not_positive_is_refused_at_the_solve(prb, solver
     if solver == "ilqr":
         with pytest.raises(ValueError, match="at node 7"):
             s.prepare()
+
+
+@pytest.mark.parametrize("name", ["ipopt", "gnsqp", "ilqr"])
+def test_every_solver_resets_to_a_cold_start_by_one_name(prb, name, monkeypatch):
+    """reset() on the NLP solvers, reset_multipliers() only on the ILQR: one name for all."""
+    solver = make_solver(name, prb)
+    prb.get_variable("x").set_bounds([1.0, 0.0], [1.0, 0.0], nodes=prb.n_nodes)
+    assert solver.solve()
+    if name == "ilqr":
+        calls = []
+        monkeypatch.setattr(solver, "reset_multipliers", lambda: calls.append(1))
+        solver.reset()
+        assert calls == [1]
+    else:
+        assert solver.lam_g is not None and solver.lam_x is not None
+        solver.reset()
+        assert solver.lam_g is None and solver.lam_x is None
+    assert solver.solve()

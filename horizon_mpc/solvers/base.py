@@ -245,6 +245,10 @@ class Solver:
         """Receding horizon: shift the problem's guesses/parameters and solver state."""
         self.prb.shift()
 
+    def reset(self) -> None:
+        """Forget what the solver carries from one solve to the next (its multipliers): the
+        next solve starts cold from the problem's initial guesses."""
+
     def _write_back(self) -> None:
         """The solution becomes the problem's initial guess (one write per kind)."""
         for kind, values in zip(("state", "input", "single"), self._stacked_solution,

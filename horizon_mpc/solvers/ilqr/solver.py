@@ -733,7 +733,7 @@ class IlqrSolver(Solver):
     @staticmethod
     def _record(it: int, ev: dict[str, Any], info: dict[str, float]) -> dict[str, float]:
         """The history entry (and callback argument) of iteration ``it``."""
-        return {"iter": it, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
+        return {"iteration": it, "cost": ev["cost"], "merit": ev["cost"] + ev["al"],
                 "violation": ev["viol"], **info}
 
     def _rti_success(self, ev: dict[str, Any]) -> bool:
@@ -751,7 +751,7 @@ class IlqrSolver(Solver):
             return False
         rti = bool(o["rti"])
         n_iter = int(o["iterations_per_call"]) if rti else int(o["max_iter"])
-        history, status, converged = [], "max_iter", False
+        history, status, converged = [], "max_iter reached", False
         it = 0
         t_iter = time.perf_counter()  # start of the current iteration
         inner = 0  # iterations since the last multiplier update
@@ -833,7 +833,7 @@ class IlqrSolver(Solver):
             t_iter = now
         if rti:
             # the iterations ran (a failure to compute a step says so, and is no success)
-            status = "rti" if status == "max_iter" else status
+            status = "rti" if status == "max_iter reached" else status
             converged = stepped and self._rti_success(ev)
         elif not converged:
             # the next solve starts from the initial penalties (multipliers kept): those a
@@ -966,6 +966,10 @@ class IlqrSolver(Solver):
         self._al.shift()
         self._prepared = None
         self._shifted = True
+
+    def reset(self) -> None:
+        """Forget the multipliers (:meth:`reset_multipliers`), as every solver's reset."""
+        self.reset_multipliers()
 
     def reset_multipliers(self) -> None:
         """Forget the augmented-Lagrangian state (e.g. after a solver failure)."""
