@@ -401,12 +401,19 @@ def test_diagnostics_warn_on_solver_failures_not_on_real_time_iterations(context
     status = node._pub_diag.msgs[-1].status[0]
     assert status.level == DiagnosticStatus.WARN and "solver failure" in status.message
     node.mpc.failures = 0
-    # a plan far from feasible (a collapsing gait: violation 100-140; walking: < 4) is WARN
+    # a plan far from feasible (a collapsing gait: violation 100-140; walking: < 4) for
+    # 0.1 s is WARN; one tick of it (a walking go2 at 100 Hz: up to 140) is not
     plan = copy.copy(node.plan)
     plan.stats = {**plan.stats, "constraint_violation": 120.0}
-    node._publish_diagnostics(plan, 12 * NS_PER_S)
-    status = node._pub_diag.msgs[-1].status[0]
-    assert status.level == DiagnosticStatus.WARN and "far from feasible" in status.message
+    for k, ms in enumerate((0, 20, 40, 60, 80, 100)):
+        node._publish_diagnostics(plan, 12 * NS_PER_S + ms * 1_000_000)
+        status = node._pub_diag.msgs[-1].status[0]
+        assert (status.level == DiagnosticStatus.WARN) is (k == 5), ms
+    assert "far from feasible" in status.message and "for 100 ms" in status.message
+    node._publish_diagnostics(node.plan, 12 * NS_PER_S + 120_000_000)  # over: OK again
+    assert node._pub_diag.msgs[-1].status[0].level == DiagnosticStatus.OK
+    node._publish_diagnostics(plan, 12 * NS_PER_S + 140_000_000)  # a new streak, one tick
+    assert node._pub_diag.msgs[-1].status[0].level == DiagnosticStatus.OK
     node.destroy_node()
 
 

@@ -41,6 +41,17 @@ def test_feet_and_base_are_frames_of_the_model(robot):
         assert np.all(np.isfinite(np.asarray(pos, float)))
 
 
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_the_nominal_posture_names_every_joint(robot, caplog):
+    """The laikago config (no SRDF) left its hip joints to the 'others at 0' and every
+    node that loaded it warned that the posture left them at 0."""
+    from horizon_mpc.posture import standing_configuration
+
+    with caplog.at_level("WARNING"):
+        standing_configuration(load_robot_config(robot))
+    assert "leaves joints" not in caplog.text
+
+
 @pytest.mark.parametrize("robot", WALKERS)
 def test_foot_radius_is_the_foot_height_when_standing(robot):
     from horizon_mpc.sim.simulator import Simulator

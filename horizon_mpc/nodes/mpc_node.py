@@ -73,6 +73,9 @@ _WATCH_PERIOD = 2.0  # s (wall): states arriving this long without a tick get ex
 #: at the combined limits, go2 (157 N) stayed below 6, b1 below 82 and hyq below 28 N; a
 #: collapsing experimental gait of go2 reached 100-140 N. Not a failure: the plan is sent
 INFEASIBLE_PLAN = 0.3
+#: s of node clock the violation must stay beyond INFEASIBLE_PLAN before it is WARN: a
+#: falling robot's plans stay there; at 100 Hz single ticks of a walking go2 reached 81-140
+INFEASIBLE_FOR = 0.1
 MISS_WARN_SHARE = 0.2  # prepare misses among the recent ticks beyond which the node warns
 _RECENT_STATES = 8  # joint_states / odom messages kept to pair them by stamp
 
@@ -219,6 +222,7 @@ class MpcNode(MpcParameters, Node):
         self._recent_misses: deque[bool] = deque(maxlen=50)  # prepare misses of recent ticks
         # N: a plan's constraint violation beyond which its status is WARN (INFEASIBLE_PLAN)
         self._infeasible_violation = INFEASIBLE_PLAN * mpc.model.mass * 9.81
+        self._infeasible_since_ns: int | None = None  # plan stamp the violation went beyond
         self.last_state_age = math.nan
         self._last_warn: dict[str, float] = {}
         self._suppressed: dict[str, int] = {}
@@ -267,7 +271,8 @@ class MpcNode(MpcParameters, Node):
     def _warn(self, kind: str, text: str) -> None:
         """A warning throttled per ``kind``; says how many were suppressed meanwhile."""
         wall = time.monotonic()
-        if wall - self._last_warn.get(kind, -math.inf) < _WARN_PERIOD:
+        # (less a little: the 2 s watchdog's own warnings were dropped every other time)
+        if wall - self._last_warn.get(kind, -math.inf) < 0.95 * _WARN_PERIOD:
             self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
             return
         n = self._suppressed.pop(kind, 0)
@@ -640,11 +645,15 @@ class MpcNode(MpcParameters, Node):
                                        "standing fallback")
             violation = stats.get("constraint_violation", 0.0)
             limit = self._infeasible_violation
-            if ok and violation > limit:
+            beyond = ok and violation > limit
+            since = self._infeasible_since_ns = (
+                (stamp_ns if self._infeasible_since_ns is None else self._infeasible_since_ns)
+                if beyond else None)
+            if beyond and stamp_ns - since >= INFEASIBLE_FOR * NS_PER_S:
                 level = DiagnosticStatus.WARN
                 message = (f"plan far from feasible (constraint violation {violation:.3g} > "
-                           f"{limit:.3g}, {INFEASIBLE_PLAN:g} of the weight): the robot may be "
-                           "falling")
+                           f"{limit:.3g}, {INFEASIBLE_PLAN:g} of the weight, for "
+                           f"{(stamp_ns - since) / 1e6:.0f} ms): the robot may be falling")
                 self._warn("infeasible", message)
             elif ok and self._misses_are_the_rule():
                 level = DiagnosticStatus.WARN
