@@ -560,10 +560,10 @@ def test_rejected_commands_keep_the_last_valid_one_until_its_timeout_and_say_so(
     for _ in range(3):
         h.pub_cmd.publish(twist(float("nan"), 0.0, 0.0))
     h.spin_until(lambda: h.node.rejected["cmd_vel"] == 3)
-    np.testing.assert_array_equal(h.node.command, [0.3, 0.0, 0.0])
+    np.testing.assert_array_equal(h.node.current_command(), [0.3, 0.0, 0.0])
     assert "the last valid one stands until cmd_timeout (0.2 s)" in said["cmd_vel"]
     time.sleep(0.3)
-    np.testing.assert_array_equal(h.node.command, [0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(h.node.current_command(), [0.0, 0.0, 0.0])
     assert said["cmd_timeout"] == ("no valid cmd_vel for more than 0.2 s (3 rejected "
                                    "since); commanding zero velocity")
 
@@ -572,9 +572,9 @@ def test_a_stale_command_becomes_zero(harness):
     h = harness(cmd_timeout=0.2)
     h.pub_cmd.publish(twist(0.3, 0.0, 0.2))
     h.spin_until(lambda: h.node._cmd is not None)
-    np.testing.assert_array_equal(h.node.command, [0.3, 0.0, 0.2])
+    np.testing.assert_array_equal(h.node.current_command(), [0.3, 0.0, 0.2])
     time.sleep(0.3)
-    np.testing.assert_array_equal(h.node.command, [0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(h.node.current_command(), [0.0, 0.0, 0.0])
 
 
 def test_bad_inputs_are_counted_and_do_not_kill_the_node(harness):
@@ -775,14 +775,14 @@ def test_a_command_from_before_the_clock_went_back_is_no_command(context, walkin
         msg = Twist()
         msg.linear.x = 0.3
         node._on_cmd_vel(msg)
-        assert node.command[0] == pytest.approx(0.3)
+        assert node.current_command()[0] == pytest.approx(0.3)
         clock.set_ros_time_override(RosTime(nanoseconds=100_000_000))  # sim restarted
-        np.testing.assert_array_equal(node.command, 0.0)
+        np.testing.assert_array_equal(node.current_command(), 0.0)
         # and it stays dead when the new clock passes the old command's time
         clock.set_ros_time_override(RosTime(nanoseconds=12_100_000_000))
-        np.testing.assert_array_equal(node.command, 0.0)
+        np.testing.assert_array_equal(node.current_command(), 0.0)
         node._on_cmd_vel(msg)  # a new one is followed
-        assert node.command[0] == pytest.approx(0.3)
+        assert node.current_command()[0] == pytest.approx(0.3)
     finally:
         node.destroy_node()
 
@@ -1280,7 +1280,7 @@ def test_time_outs_and_the_idle_stance_change_live(harness):
     h.pub_cmd.publish(twist(0.3, 0.0, 0.0))
     h.spin_until(lambda: h.node._cmd is not None)
     time.sleep(0.1)
-    np.testing.assert_array_equal(h.node.command, [0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(h.node.current_command(), [0.0, 0.0, 0.0])
     h.publish_state(age=1.0)
     h.spin_until(lambda: h.trajectories)
     assert h.node.stale_skips == 0

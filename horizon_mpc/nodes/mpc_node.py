@@ -103,69 +103,8 @@ class MpcNode(MpcParameters, Node):
         for name, default, description in MODEL_PARAMETER_DECLARATIONS:
             self._declare(name, default, description, ro=True)
         cfg = load_robot_config(self._p("config") or self._p("robot"))
-        settings = (mpc.settings if mpc is not None
-                    else MpcSettings.from_dict(cfg.section("mpc")))
-        self._declare_parameters(settings, rate_sets_horizon=mpc is None)
-        horizon = (int(self._p("n_nodes")), float(self._p("dt")))
-        if mpc is not None and horizon != (settings.n_nodes, settings.dt):
-            raise ValueError(f"n_nodes/dt {horizon} differ from those of the given MPC "
-                             f"({settings.n_nodes}, {settings.dt}): build it with them")
-        duty = gait_duty_factor(self._p("duty_factor"))
-        settings.n_nodes, settings.dt = horizon
-        g = settings.gait
-        g.name, g.step_duration = self._p("gait"), self._p("step_duration")
-        g.step_height, g.duty_factor = self._p("step_height"), duty
-        settings.max_velocity = [self._p(n) for n in LIVE_LIMITS]
-        settings.max_command_norm = float(self._p("max_command_norm"))
-        settings.stand_when_idle = bool(self._p("stand_when_idle"))
-        settings.prepare_ahead = bool(self._p("prepare_ahead"))
-        nodes_per_tick = settings.dt * float(self._p("control_rate"))
-        nodes_per_tick = 1.0 / nodes_per_tick if nodes_per_tick > 0 else math.nan
-        if settings.prepare_ahead and self._p("trigger") == "timer" and not (
-                round(nodes_per_tick) >= 1 and abs(nodes_per_tick - round(nodes_per_tick))
-                <= 0.05):
-            # a tick of a fraction of a node: each preparation predicted node 0 from a warm
-            # start blended between two nodes, and go2 fell at 2.3-2.5 s at 100 Hz
-            # (dt 0.02 s) in real time; whole ticks walked
-            settings.prepare_ahead = False
-            self.get_logger().warning(
-                f"prepare_ahead is off (the parameter keeps its value): control_rate "
-                f"{self._p('control_rate'):g} Hz moves the horizon {nodes_per_tick:.3g} nodes a "
-                f"tick (dt {settings.dt:g} s); it needs whole nodes (control_rate = 1/dt, or "
-                "1/(k dt)). Fractional ticks blend the warm start between nodes: go2 fell at "
-                "100 Hz in 3 of 5 real-time runs even without it, and at 2.9 s in the "
-                "lockstep closed loop")
-        settings.max_extrapolation = float(self._p("max_extrapolation"))
-        settings.feedback_tolerance = float(self._p("feedback_tolerance"))
-        settings.weights = self._weights_from_parameters(settings.weights)
-
-        for note in (*gait_warnings(g.name, g.step_duration, g.duty_factor),
-                     *weight_warnings(settings.weights)):
-            self.get_logger().warning(note)
-        for note in timing_warnings(settings.dt, settings.n_nodes,
-                                    1.0 / self._p("control_rate"),
-                                    min(self._p("publish_points"), settings.n_nodes),
-                                    self._p("trigger")):
-            self.get_logger().warning(note)
-        t = time.perf_counter()
-        if mpc is None:
-            model = robot_model(cfg, str(self._p("urdf_path")),
-                                str(self._p("robot_description")))
-            model = model if model is not None else RobotModel.from_config(cfg)
-            _check_joints(model)  # before the build (tens of seconds)
-            mpc = WalkingMpc(cfg, model, settings=settings, iterations=self._p("iterations"))
-        else:
-            _check_joints(mpc.model)
-            mpc.set_gait(g.name, g.step_duration, g.step_height, g.duty_factor)
-            mpc.set_stand_when_idle(settings.stand_when_idle)
-            mpc.wp.set_weights(settings.weights)
-        self.mpc = mpc
-        source = model_source(cfg, str(self._p("urdf_path")), str(self._p("robot_description")))
-        self.get_logger().info(
-            f"built the {cfg.name} walking MPC (model from {source}) in "
-            f"{time.perf_counter() - t:.2f} s "
-            f"({settings.n_nodes} nodes x {settings.dt:g} s, {mpc.iterations} "
-            f"iteration(s)/tick, gait {g.name})")
+        settings = self._settings_from_parameters(cfg, mpc)
+        mpc = self.mpc = self._controller(cfg, settings, mpc)
         self.joint_names = list(mpc.model.joint_names)
         # readings far outside these are refused (a wrong joint offset, a garbled message);
         # an empty range (lower >= upper, e.g. centauro's wheels at [0, 0]) is no limit
@@ -231,6 +170,85 @@ class MpcNode(MpcParameters, Node):
         # body's when the config names a link fixed to it (a1: trunk on base)
         self._base_frames = {mpc.cfg.base_link, mpc.model.root_link}
 
+        self._create_interfaces()
+    def _settings_from_parameters(self, cfg: RobotConfig, mpc: WalkingMpc | None
+                                  ) -> MpcSettings:
+        """Declare the parameters (defaults from ``cfg``'s ``mpc:`` section, or the given
+        controller's settings) and return the settings they choose, warning about values
+        outside where the robot was seen to walk."""
+        settings = (mpc.settings if mpc is not None
+                    else MpcSettings.from_dict(cfg.section("mpc")))
+        self._declare_parameters(settings, rate_sets_horizon=mpc is None)
+        horizon = (int(self._p("n_nodes")), float(self._p("dt")))
+        if mpc is not None and horizon != (settings.n_nodes, settings.dt):
+            raise ValueError(f"n_nodes/dt {horizon} differ from those of the given MPC "
+                             f"({settings.n_nodes}, {settings.dt}): build it with them")
+        duty = gait_duty_factor(self._p("duty_factor"))
+        settings.n_nodes, settings.dt = horizon
+        g = settings.gait
+        g.name, g.step_duration = self._p("gait"), self._p("step_duration")
+        g.step_height, g.duty_factor = self._p("step_height"), duty
+        settings.max_velocity = [self._p(n) for n in LIVE_LIMITS]
+        settings.max_command_norm = float(self._p("max_command_norm"))
+        settings.stand_when_idle = bool(self._p("stand_when_idle"))
+        settings.prepare_ahead = bool(self._p("prepare_ahead"))
+        nodes_per_tick = settings.dt * float(self._p("control_rate"))
+        nodes_per_tick = 1.0 / nodes_per_tick if nodes_per_tick > 0 else math.nan
+        if settings.prepare_ahead and self._p("trigger") == "timer" and not (
+                round(nodes_per_tick) >= 1 and abs(nodes_per_tick - round(nodes_per_tick))
+                <= 0.05):
+            # a tick of a fraction of a node: each preparation predicted node 0 from a warm
+            # start blended between two nodes, and go2 fell at 2.3-2.5 s at 100 Hz
+            # (dt 0.02 s) in real time; whole ticks walked
+            settings.prepare_ahead = False
+            self.get_logger().warning(
+                f"prepare_ahead is off (the parameter keeps its value): control_rate "
+                f"{self._p('control_rate'):g} Hz moves the horizon {nodes_per_tick:.3g} nodes a "
+                f"tick (dt {settings.dt:g} s); it needs whole nodes (control_rate = 1/dt, or "
+                "1/(k dt)). Fractional ticks blend the warm start between nodes: go2 fell at "
+                "100 Hz in 3 of 5 real-time runs even without it, and at 2.9 s in the "
+                "lockstep closed loop")
+        settings.max_extrapolation = float(self._p("max_extrapolation"))
+        settings.feedback_tolerance = float(self._p("feedback_tolerance"))
+        settings.weights = self._weights_from_parameters(settings.weights)
+
+        for note in (*gait_warnings(g.name, g.step_duration, g.duty_factor),
+                     *weight_warnings(settings.weights)):
+            self.get_logger().warning(note)
+        for note in timing_warnings(settings.dt, settings.n_nodes,
+                                    1.0 / self._p("control_rate"),
+                                    min(self._p("publish_points"), settings.n_nodes),
+                                    self._p("trigger")):
+            self.get_logger().warning(note)
+        return settings
+
+    def _controller(self, cfg: RobotConfig, settings: MpcSettings,
+                    mpc: WalkingMpc | None) -> WalkingMpc:
+        """The walking MPC: built from the parameters' model (seconds, logged), or the given
+        one set to the parameters' gait, idle stance and weights."""
+        g = settings.gait
+        t = time.perf_counter()
+        if mpc is None:
+            model = robot_model(cfg, str(self._p("urdf_path")),
+                                str(self._p("robot_description")))
+            model = model if model is not None else RobotModel.from_config(cfg)
+            _check_joints(model)  # before the build (tens of seconds)
+            mpc = WalkingMpc(cfg, model, settings=settings, iterations=self._p("iterations"))
+        else:
+            _check_joints(mpc.model)
+            mpc.set_gait(g.name, g.step_duration, g.step_height, g.duty_factor)
+            mpc.set_stand_when_idle(settings.stand_when_idle)
+            mpc.wp.set_weights(settings.weights)
+        source = model_source(cfg, str(self._p("urdf_path")), str(self._p("robot_description")))
+        self.get_logger().info(
+            f"built the {cfg.name} walking MPC (model from {source}) in "
+            f"{time.perf_counter() - t:.2f} s "
+            f"({settings.n_nodes} nodes x {settings.dt:g} s, {mpc.iterations} "
+            f"iteration(s)/tick, gait {g.name})")
+        return mpc
+
+    def _create_interfaces(self) -> None:
+        """Publishers, subscriptions, the parameter callback and the timers."""
         self._pub_traj = self.create_publisher(JointTrajectory, "joint_trajectory", 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_path = self.create_publisher(Path, "~/predicted_base_path", 10)
@@ -347,9 +365,10 @@ class MpcNode(MpcParameters, Node):
                                     "arrive (different types never connect)",
                                     key=f"{sub.topic_name} {info.topic_type}")
 
-    @property
-    def command(self) -> np.ndarray:
-        """The command used now: the last cmd_vel, or zero once it is older than cmd_timeout."""
+    def current_command(self) -> np.ndarray:
+        """The command to use now: the last cmd_vel, or zero once it is older than
+        cmd_timeout (which is said once) or stamped on a clock that has gone back since
+        (then dropped)."""
         age = None if self._cmd is None else self.now() - self._cmd[0]
         if age is not None and age < 0.0:
             # the clock went back (a restarted simulator) since it came: no command of this
@@ -518,7 +537,7 @@ class MpcNode(MpcParameters, Node):
         _, pos, quat, lin, ang = base
         q = np.concatenate((pos, quat, qj))
         v = np.concatenate((lin, ang, vj))
-        cmd = self.command
+        cmd = self.current_command()
         previous_ns, self._last_tick_stamp = self._last_tick_stamp, stamp_ns
         bootstrap = self.plan is None
         prepared = False  # a preparation awaited this tick
