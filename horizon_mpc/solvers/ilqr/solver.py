@@ -794,25 +794,9 @@ class IlqrSolver(Solver):
             if o["verbose"]:
                 self._progress(f"{it:3d} cost {ev['cost']:.6e} viol {ev['viol']:.2e} alpha "
                                f"{info['alpha']:.3f} mu {self.mu:.1e}")
-            if not rti and stationary and ev["viol"] <= o["tol_constraint"] and (
-                    self._complementarity(ev) <= o["tol_complementarity"]):
-                status, converged = "converged", True
-                break
-            if not rti and stationary and self._al.barrier and (
-                    ev["viol_eq"] <= o["tol_constraint"]):
-                # the barrier problem is solved; what its rows are still past their bounds
-                # is its relaxation, which more iterations do not change
-                status = "stationary: the barrier's optimum, inequality rows past their bounds"
-                break
-            if not rti and stationary and ev["viol_free"] <= o["tol_constraint"] < (
-                    ev["viol_fixed"]):
-                status = "infeasible: the fixed initial state violates constraints at node 0"
-                break
-            if info.get("backward_failed"):
-                status = "regularisation limit reached"
-                break
-            if info.get("linearisation_failed"):
-                status = "linearisation not finite (NaN/Inf) at every regularisation"
+            reason = self._stop_reason(ev, info, stationary and not rti)
+            if reason is not None:
+                status, converged = reason, reason == "converged"
                 break
             if (not rti and not self._auto_box and it == o["box_after"]
                     and self._auto_applies() and it < n_iter):
@@ -836,20 +820,7 @@ class IlqrSolver(Solver):
             status = "rti" if status == "max_iter reached" else status
             converged = stepped and self._rti_success(ev)
         elif not converged:
-            # the next solve starts from the initial penalties (multipliers kept): those a
-            # failed solve ratcheted to rho_max, carried on by shift(), left every later
-            # solve of a receding horizon ill-conditioned (it failed from then on)
-            self._al.reset_penalties()
-            self._alN.reset_penalties()
-            # multipliers past the largest penalty (an infeasible problem's, e.g. 1.7e11 on a
-            # final equality that a state box made unreachable) are no estimate: kept, they
-            # held the next solve at max_iter after the box was relaxed (a fresh solver: 80
-            # iterations to the optimum)
-            dropped = (self._al.forget_diverged(o["rho_max"])
-                       + self._alN.forget_diverged(o["rho_max"]))
-            if dropped:
-                log.info("ilqr: %d constraint row(s) ended with multipliers above rho_max "
-                         "(%g): the next solve starts them at zero", dropped, o["rho_max"])
+            self._after_failed_solve()
         self.stats.iterations = it
         self.stats.status = status
         self.stats.success = bool(converged)
@@ -857,6 +828,41 @@ class IlqrSolver(Solver):
         self.stats.time = time.perf_counter() - t_start
         self._publish(ev)
         return bool(converged)
+
+    def _stop_reason(self, ev: dict[str, Any], info: dict[str, Any],
+                     stationary: bool) -> str | None:
+        """Why the solve stops after this iteration: 'converged', a stationary point that
+        is no solution, or a failure to compute a step; None to go on. ``stationary``: the
+        iteration's step says so (never in real-time calls, which stop on failures only)."""
+        o = self.opts
+        if stationary and ev["viol"] <= o["tol_constraint"] and (
+                self._complementarity(ev) <= o["tol_complementarity"]):
+            return "converged"
+        if stationary and self._al.barrier and ev["viol_eq"] <= o["tol_constraint"]:
+            # the barrier problem is solved; what its rows are still past their bounds is
+            # its relaxation, which more iterations do not change
+            return "stationary: the barrier's optimum, inequality rows past their bounds"
+        if stationary and ev["viol_free"] <= o["tol_constraint"] < ev["viol_fixed"]:
+            return "infeasible: the fixed initial state violates constraints at node 0"
+        if info.get("backward_failed"):
+            return "regularisation limit reached"
+        if info.get("linearisation_failed"):
+            return "linearisation not finite (NaN/Inf) at every regularisation"
+        return None
+
+    def _after_failed_solve(self) -> None:
+        """What a converging solve that failed leaves for the next one: the initial
+        penalties (those it ratcheted to rho_max, carried on by shift(), left every later
+        solve of a receding horizon ill-conditioned), and no multiplier past rho_max (an
+        infeasible problem's, e.g. 1.7e11 on a final equality a state box made unreachable:
+        kept, they held the next solve at max_iter after the box was relaxed)."""
+        self._al.reset_penalties()
+        self._alN.reset_penalties()
+        rho_max = self.opts["rho_max"]
+        dropped = self._al.forget_diverged(rho_max) + self._alN.forget_diverged(rho_max)
+        if dropped:
+            log.info("ilqr: %d constraint row(s) ended with multipliers above rho_max (%g): "
+                     "the next solve starts them at zero", dropped, rho_max)
 
     def _publish(self, ev) -> None:
         self.stats.cost = ev["cost"] if ev else math.nan
