@@ -42,3 +42,18 @@ def test_the_readme_example_solves_with_each_solver_its_comment_names(solver_cal
     assert solver.stats.success, solver.stats.status
     assert solver.stats.cost == pytest.approx(73.3816, abs=1e-3)
     assert solver.solution["x"].shape == (2, 61)
+
+
+def test_every_solver_option_is_in_its_docstring_table():
+    """The ILQR's options were one prose paragraph that had lost some; each solver's table
+    (class or module docstring) names every option it takes."""
+    import sys
+
+    from horizon_mpc.solvers.gnsqp import GnSqpSolver
+    from horizon_mpc.solvers.ilqr.solver import IlqrSolver
+    from horizon_mpc.solvers.ipopt import IpoptSolver
+
+    for cls in (IlqrSolver, GnSqpSolver, IpoptSolver):
+        doc = (cls.__doc__ or "") + (sys.modules[cls.__module__].__doc__ or "")
+        missing = [o for o in cls.DEFAULTS if f"``{o}``" not in doc and f"``{o}*``" not in doc]
+        assert not missing, (cls.name, missing)

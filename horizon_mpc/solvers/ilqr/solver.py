@@ -62,43 +62,68 @@ def _blocks(out: np.ndarray, n: int, rows: int, cols: int) -> np.ndarray:
 class IlqrSolver(Solver):
     """Constrained multiple-shooting ILQR; see the module docstring.
 
-    Options (defaults in ``DEFAULTS``): ``max_iter``; ``rti`` (True: exactly
-    ``iterations_per_call`` iterations per ``solve()``, no convergence loop);
-    ``iterations_per_call``; ``tol`` (stationarity: expected decrease relative to the cost);
-    ``tol_constraint`` (defects, constraints, bounds; inf-norm); ``tol_complementarity``
-    (inequality rows: the largest ``|min(multiplier, slack)|``, as IPOPT's
-    ``compl_inf_tol``, whose default it takes); ``mu_init``/``mu_min``/
-    ``mu_max`` (regularisation); ``rho_init``/``rho_factor``/``rho_max`` (AL penalty; fixed
-    at its current value in ``rti`` mode);
-    ``line_search_steps`` (number of halvings); ``time_budget`` (s per call, None: none; an
-    iteration is not started when the previous one's duration would take the call past it,
-    the first always runs; ``stats.status`` is then ``'time budget'``);
-    ``codegen`` (compile the node functions); ``callback`` (called with a dict per iteration);
-    ``equality``: ``'projection'`` (equality rows handled exactly in the backward pass,
-    see :mod:`.equality`; rows that do not fit a node's inputs use the augmented
-    Lagrangian) or ``'lagrangian'`` (every row through the augmented Lagrangian);
-    ``al_inner_tol``/``al_max_inner``: a converging solve updates the multipliers and
-    penalties when the expected decrease is below ``al_inner_tol`` times the cost (the inner
-    problem is nearly solved), after a rejected step, or every ``al_max_inner`` iterations;
-    ``rti_multiplier_update``: False leaves a real-time call's multipliers alone (the
-    split iteration of :meth:`prepare`/:meth:`feedback` updates them after its feedback);
-    ``inequality``: ``'lagrangian'`` (inequality rows and bounds through the augmented
-    Lagrangian: exact at convergence) or ``'barrier'`` (a relaxed log barrier of weight
-    ``barrier_mu`` and relaxation slack ``barrier_delta``, in the rows' units: smooth, so
-    one iteration per MPC tick does not chatter on the active set, but only approximately
-    feasible; see :mod:`.lagrangian`);
-    ``input_bounds``: ``'box'`` (bounds of the inputs kept by the backward pass: a
-    box-constrained QP per node and clamped rollouts, control-limited DDP; at nodes with
-    projected equality rows they go through the augmented Lagrangian), ``'lagrangian'``
-    (every node's through the augmented Lagrangian, as the other bounds) or ``'auto'``
-    (the default: a converging solve starts with ``'lagrangian'``, robust far from the
-    solution, and goes on with ``'box'`` from its current iterate when it has not converged
-    after ``box_after`` iterations, where the augmented Lagrangian's active set of the input
-    bounds stalls; real-time calls, and the barrier's (``inequality='barrier'``), keep
-    ``'lagrangian'``: the bounds in the barrier);
-    ``line_search``: False takes every full step (the classic real-time iteration of an
-    MPC, where the next tick corrects the linearisation error); a step whose evaluation is
-    not finite is still rejected.
+    Options (``make_solver('ilqr', prb, opts)``; ``*``: read when the solver is built,
+    ``set_option`` refuses a change):
+
+    ========================= ============== ==============================================
+    ``max_iter``              300            iteration limit of a converging solve
+    ``rti``                   False          True: exactly ``iterations_per_call``
+                                             iterations per ``solve()``, no convergence
+                                             test (real-time iterations)
+    ``iterations_per_call``   1              iterations of a real-time call
+    ``tol``                   1e-8           stationarity: expected decrease / (1 + cost)
+    ``tol_constraint``        1e-6           defects, constraints, bounds (inf-norm)
+    ``tol_complementarity``   1e-4           inequality rows: largest
+                                             ``|min(multiplier, slack)|`` (IPOPT's
+                                             ``compl_inf_tol`` default)
+    ``mu_init``               1e-8           regularisation of the backward pass: its
+    ``mu_min``                1e-10          start and bounds
+    ``mu_max``                1e10
+    ``rho_init*``             100            augmented-Lagrangian penalty; grows by
+    ``rho_factor``            10             ``rho_factor`` up to ``rho_max`` (fixed in
+    ``rho_max``               1e9            ``rti`` mode: the problem moves between calls)
+    ``line_search``           True           False: every full step (the classic
+                                             real-time iteration); a step whose
+                                             evaluation is not finite is still rejected
+    ``line_search_steps``     10             halvings of the step tried
+    ``time_budget``           None           s per call: an iteration is not started when
+                                             the last one's duration would take the call
+                                             past it (the first always runs; status
+                                             ``'time budget'``)
+    ``codegen*``              True           compile the node functions (cached on disk)
+    ``callback``              None           called with the history dict of each
+                                             iteration
+    ``equality*``             'projection'   equality rows exact in the backward pass
+                                             (:mod:`.equality`; rows that do not fit a
+                                             node's inputs use the augmented Lagrangian),
+                                             or 'lagrangian' (all rows through it)
+    ``al_inner_tol``          1e-3           a converging solve updates multipliers and
+    ``al_max_inner``          10             penalties when the expected decrease is below
+                                             ``al_inner_tol`` x cost, after a rejected
+                                             step, or every ``al_max_inner`` iterations
+    ``rti_multiplier_update`` True           False leaves a real-time call's multipliers
+                                             alone (:meth:`prepare`/:meth:`feedback`
+                                             update them after the feedback)
+    ``inequality*``           'lagrangian'   inequality rows and bounds through the
+                                             augmented Lagrangian (exact at convergence),
+                                             or 'barrier': a relaxed log barrier of weight
+                                             ``barrier_mu*`` (1) and slack
+                                             ``barrier_delta*`` (1), in the rows' units:
+                                             smooth, so one iteration per MPC tick does not
+                                             chatter on the active set, approximately
+                                             feasible (:mod:`.lagrangian`)
+    ``input_bounds``          'auto'         'box': the inputs' bounds kept by the backward
+                                             pass (box QP per node, clamped rollouts;
+                                             through the Lagrangian at nodes with projected
+                                             rows); 'lagrangian': as the other bounds;
+                                             'auto': 'lagrangian', then 'box' from the
+                                             current iterate after ``box_after`` (20)
+                                             iterations without convergence (real-time
+                                             calls and the barrier keep 'lagrangian')
+    ``box_after``             20             (see ``input_bounds``)
+    ``barrier_mu*``           1.0            (see ``inequality``)
+    ``barrier_delta*``        1.0            (see ``inequality``)
+    ========================= ============== ==============================================
     """
 
     name = "ilqr"
