@@ -471,10 +471,28 @@ def test_ipopt_reports_the_returned_points_violation_when_it_never_ran(prb):
     # garbage iteration count for an initial guess that violates the goal by 1
     prb.get_variable("x").set_bounds([0, 0], [0, 0], nodes=0)
     prb.create_final_constraint("goal", prb.get_variable("x") - np.array([1.0, 0.0]))
-    solver = make_solver("ipopt", prb, {"linear_solver": "ma27"})  # no HSL library here
+    # (an IPOPT option passed through unchecked: HSL is not installed here)
+    solver = make_solver("ipopt", prb, {"ipopt.linear_solver": "ma27"})
     assert not solver.solve()
     assert solver.stats.constraint_violation == pytest.approx(1.0)
     assert solver.stats.iterations == 0
+
+
+def test_ipopt_refuses_a_linear_solver_it_cannot_load_at_the_build(prb):
+    """'ma27' without the HSL library was accepted and failed at the solve (Invalid_Option,
+    cost 0); an unknown name too."""
+    from horizon_mpc.solvers.ipopt import hsl_available
+
+    if not hsl_available():
+        with pytest.raises(ValueError, match="'ma27' needs the HSL library"):
+            make_solver("ipopt", prb, {"linear_solver": "ma27"})
+        solver = make_solver("ipopt", prb)
+        with pytest.raises(ValueError, match="needs the HSL library"):
+            solver.set_option("linear_solver", "ma57")
+        assert solver.opts["linear_solver"] == "mumps"
+    with pytest.raises(ValueError, match="'linear_solver' .* must be one of"):
+        make_solver("ipopt", prb, {"linear_solver": "pardiso7"})
+    make_solver("ipopt", prb, {"linear_solver": "spral"})
 
 
 def test_ilqr_feedback_of_the_wrong_size_keeps_the_preparation(prb):
@@ -583,3 +601,80 @@ def test_every_solver_resets_to_a_cold_start_by_one_name(prb, name, monkeypatch)
         solver.reset()
         assert solver.lam_g is None and solver.lam_x is None
     assert solver.solve()
+
+
+def test_a_solver_that_fails_to_build_leaves_the_problem_changeable(prb):
+    """A QP solver name gnsqp refuses, a state layout leapfrog refuses: the problem stayed
+    frozen ('already built into a solver') though no solver was built."""
+    u = prb.get_variable("u")
+    with pytest.raises(ValueError, match="QP solver 'bogus'"):
+        make_solver("gnsqp", prb, {"qp_solver": "bogus"})
+    prb.create_cost("effort", u)  # still changeable
+    with pytest.raises(TypeError, match="'qp_solver'"):  # a SWIG NotImplementedError before
+        make_solver("gnsqp", prb, {"qp_solver": 5})
+    with pytest.raises(ValueError, match="refuses its options"):
+        make_solver("gnsqp", prb, {"qp_options": {"bogus": 1}})
+    solver = make_solver("gnsqp", prb)
+    with pytest.raises(ValueError, match="refuses its options"):
+        solver.set_option("qp_options", {"bogus": 1})
+    assert solver.opts["qp_options"] == {} and solver.solve()
+
+
+def test_gnsqp_is_not_converged_by_steps_a_huge_regularisation_made_tiny(prb):
+    """regularization 1e9 made every step tiny: 'converged' after 1 iteration at cost 16
+    (optimum 12.03), stationarity 0.4."""
+    x, u = prb.get_variable("x"), prb.get_variable("u")
+    x.set_bounds([0, 0], [0, 0], nodes=0)
+    x.set_bounds([1, 0], [1, 0], nodes=prb.n_nodes)
+    prb.create_cost("effort", u)
+    ref = make_solver("ipopt", prb)
+    assert ref.solve()
+    u.set_initial_guess(ref.solution["u"] + 0.5)
+    x.set_initial_guess(ref.solution["x"])
+    solver = make_solver("gnsqp", prb, {"regularization": 1e9, "max_iter": 5})
+    assert not solver.solve()
+    assert solver.stats.status == "max_iter reached"
+
+
+def test_ilqr_reset_and_mu_init_act_as_on_a_fresh_solver():
+    """reset() left the 'auto' box mode a solve had kept (the next solve took the box from
+    iteration 0); set_option('mu_init') was read at the build only."""
+    from horizon_mpc.examples import pendulum_dynamics
+
+    prb = Problem(60)  # a swing-up whose input bound is active: 'auto' goes to the box
+    th, om = prb.create_state_variable("th", 1), prb.create_state_variable("om", 1)
+    tau = prb.create_input_variable("tau", 1)
+    prb.set_dynamics(cs.vertcat(om, pendulum_dynamics(th, om, tau)))
+    prb.set_dt(0.05)
+    th.set_bounds(0, 0, nodes=0)
+    om.set_bounds(0, 0, nodes=0)
+    tau.set_bounds(-5.5, 5.5)
+    th.set_initial_guess(np.linspace(0, np.pi, 61)[None])
+    prb.create_final_constraint("up", cs.vertcat(th - np.pi, om))
+    prb.create_cost("effort", 0.1 * tau)
+    solver = make_solver("ilqr", prb)
+    guesses = {v.name: v.initial_guess for v in (*prb.states, *prb.inputs)}
+    solver.solve()
+    first = (solver.stats.iterations, solver.stats.extra.get("box_from"))
+    assert first[1] == 20, first  # the box took over: reset() must forget that
+    solver.reset()
+    for v in (*prb.states, *prb.inputs):
+        v.set_initial_guess(guesses[v.name])
+    solver.solve()
+    assert (solver.stats.iterations, solver.stats.extra.get("box_from")) == first
+    solver.set_option("mu_init", 1.0)
+    assert solver.mu == 1.0
+
+
+def test_an_exception_in_a_solve_leaves_no_earlier_success_in_the_stats(prb):
+    prb.create_cost("effort", prb.get_variable("u"))
+    solver = make_solver("ilqr", prb)
+    assert solver.solve() and solver.stats.success
+
+    def failing(_record):
+        raise KeyError("boom")
+
+    solver.set_option("callback", failing)
+    with pytest.raises(KeyError):
+        solver.solve()
+    assert not solver.stats.success and solver.stats.status == "interrupted (KeyError)"

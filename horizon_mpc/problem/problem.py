@@ -501,6 +501,16 @@ class Problem:
                   "%d costs", self.nx, self.ndx, self.nu, self.ns, self.np_, self.n_nodes,
                   len(self.constraints), len(self.costs))
 
+    @property
+    def finalized(self) -> bool:
+        """Whether the problem is frozen (built into a solver)."""
+        return self._finalized
+
+    def _release(self) -> None:
+        """Undo :meth:`finalize`: a solver that failed to build calls it on the problem it
+        had frozen (the user can then change the problem and build again)."""
+        self._finalized = False
+
     # ------------------------------------------------------------------ receding horizon
     def shift(self) -> None:
         """Shift every variable's initial guess and every parameter's values one node back.

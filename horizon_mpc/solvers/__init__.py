@@ -30,4 +30,10 @@ def make_solver(name: str, prb: Problem, opts: dict[str, Any] | None = None) -> 
     if name not in SOLVERS:
         raise ValueError(f"unknown solver {name!r}; choose one of {sorted(SOLVERS)}")
     module, cls = SOLVERS[name].split(":")
-    return getattr(importlib.import_module(module), cls)(prb, opts)
+    frozen = prb.finalized
+    try:
+        return getattr(importlib.import_module(module), cls)(prb, opts)
+    except Exception:
+        if not frozen:  # refused (a QP solver, an integrator's state layout...): the user
+            prb._release()  # can still fix the problem
+        raise

@@ -233,7 +233,13 @@ class Solver:
         """
         self.check_problem_unchanged()
         self.prb.check_dt_values()
-        ok = self._solve()
+        try:
+            ok = self._solve()
+        except BaseException as exc:  # an exception in a solve (a callback's, Ctrl-C): the
+            # stats said the previous solve's success
+            self.stats.success = False
+            self.stats.status = f"interrupted ({type(exc).__name__})"
+            raise
         if self.solution and self.opts["warm_start"]:
             self._write_back()
         return ok

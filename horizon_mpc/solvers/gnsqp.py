@@ -19,11 +19,12 @@ Convergence: the constraint violation (dynamics, constraints, bounds; inf-norm) 
 ``tol_constr`` and either the KKT stationarity ``||grad f + J_g' lam_g + lam_x||_inf`` and
 complementarity (``|lam| *`` distance to the bound it acts on), both divided by IPOPT's
 multiplier scale ``max(1, mean |lam| / 100)``, are below ``tol``, or the last step
-``||alpha d||_inf`` is below ``tol_step``. A solve starts from the last solve's
-multipliers, with the signs the current bounds allow (a row opened since then frees its
-multiplier). When no step decreases the merit, the QP's multipliers are taken once
-without a step and the KKT test decides (a start at a solution); a second failure ends
-the solve ("line search failed"). Five elastic steps in a row that predict no less
+``||alpha d||_inf`` is below ``tol_step`` with the stationarity below ``sqrt(tol)`` (a
+step can be tiny far from a solution: under a huge regularisation). A solve starts from
+the last solve's multipliers, with the signs the current bounds allow (a row opened since
+then frees its multiplier). When no step decreases the merit, the QP's multipliers are
+taken once without a step and the KKT test decides (a start at a solution); a second
+failure ends the solve ("line search failed"). Five elastic steps in a row that predict no less
 violation than the current one end it as "locally infeasible".
 
 Gauss-Newton ignores the curvature of the constraints (``lam' d2g``): convergence is
@@ -105,7 +106,6 @@ class GnSqpSolver(NlpSolver):
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
-        _check_qp_solver(self.opts["qp_solver"])
         tr = self.transcription
         # The SQP works on w and g sorted stage-wise (see Transcription.node_order): the
         # KKT matrices are then banded and the QP factorisations stay sparse.
@@ -128,6 +128,11 @@ class GnSqpSolver(NlpSolver):
         self._evaluate = cs.Function("gn_evaluate", [w, P], [f, g], ["w", "p"], ["f", "g"])
         self._H_sp, self._A_sp = H.sparsity(), J_g.sparsity()
         self._qp: dict[bool, cs.Function] = {}
+        try:  # built now: options the QP plugin refuses are named here, not at a solve
+            self._qp_solver()
+        except RuntimeError as exc:
+            raise ValueError(f"gnsqp: the QP solver {self.opts['qp_solver']!r} refuses its "
+                             f"options {self.opts['qp_options']!r}: {_first_line(exc)}") from None
 
     def _check_problem(self, prb: Problem) -> None:
         general = [n for n, c in prb.costs.items() if isinstance(c, GeneralCost)]
@@ -136,13 +141,23 @@ class GnSqpSolver(NlpSolver):
                              f"{general} need a full Hessian: use the 'ipopt' solver, or write "
                              "them as residuals with create_cost()")
 
+    def _check_together(self, opts: dict[str, Any]) -> None:
+        _check_qp_solver(opts["qp_solver"])
+
     def set_option(self, key: str, value: Any) -> None:
-        """Change one option; a new QP solver is built on the next solve if needed."""
-        if key == "qp_solver":
-            _check_qp_solver(value)
+        """Change one option; the QP solver is rebuilt (and its options checked) at once."""
+        previous = self.opts[key] if key in self.opts else None
         super().set_option(key, value)
         if key in ("qp_solver", "qp_options", "regularization"):
             self._qp.clear()
+            try:
+                self._qp_solver()
+            except RuntimeError as exc:  # CasADi's refusal of a QP option
+                self.opts[key] = previous
+                self._qp.clear()
+                raise ValueError(f"gnsqp: {key} {value!r}: the QP solver "
+                                 f"{self.opts['qp_solver']!r} refuses its options: "
+                                 f"{_first_line(exc)}") from None
 
     def _qp_solver(self, elastic: bool = False) -> cs.Function:
         if elastic not in self._qp:
@@ -229,8 +244,10 @@ class GnSqpSolver(NlpSolver):
                 status = (_not_finite_at_guess(w, p, f, viol) if it == 0
                           else "not finite after a step")
                 break
-            if viol <= o["tol_constr"] and ((stat <= o["tol"] and comp <= o["tol"])
-                                            or step <= o["tol_step"]):
+            # a tiny step alone is no convergence: a huge regularisation makes every step
+            # tiny (1e9: 'converged' at cost 16 against the optimum's 12, stationarity 0.4)
+            if viol <= o["tol_constr"] and ((stat <= o["tol"] and comp <= o["tol"]) or (
+                    step <= o["tol_step"] and stat <= math.sqrt(o["tol"]))):
                 status, success = "converged", True
                 break
             if it == o["max_iter"]:
@@ -321,6 +338,13 @@ def _complementarity(lam: np.ndarray, val: np.ndarray, lb: np.ndarray,
     prod = np.abs(lam) * np.where(np.isfinite(dist), np.abs(dist), 0.0)
     # an infinite distance with a nonzero multiplier is impossible after _signed
     return float(np.max(prod, initial=0.0))
+
+
+def _first_line(exc: Exception) -> str:
+    """The informative line of a CasADi error (its first lines name C++ files)."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return next((ln for ln in reversed(lines) if "casadi" not in ln.lower()[:40]), lines[-1]
+                if lines else type(exc).__name__)
 
 
 def _check_qp_solver(name: str) -> None:

@@ -8,7 +8,8 @@ Options (``make_solver('ipopt', prb, opts)``):
 ``constr_viol_tol`` 1e-8     IPOPT constraint-violation tolerance
 ``print_level``     0        IPOPT verbosity (0..12)
 ``print_time``      False    CasADi's timing printout
-``linear_solver``   'mumps'  IPOPT linear solver ('mumps', 'spral')
+``linear_solver``   'mumps'  IPOPT linear solver: 'mumps', 'spral', or HSL's 'ma27', 'ma57',
+                             'ma77', 'ma86', 'ma97' where its library is installed
 ``sym``             'SX'     graph type of the transcription ('SX' or 'MX')
 ``constraint_rows`` 'valid'  'valid' (node sets change freely) or 'active' (smaller
                              NLP; see :class:`~horizon_mpc.problem.transcription.
@@ -27,6 +28,7 @@ Changing an option with :meth:`set_option` rebuilds the instances, never the NLP
 
 from __future__ import annotations
 
+import ctypes.util
 import logging
 import math
 import time
@@ -37,7 +39,7 @@ import casadi as cs
 from horizon_mpc.problem import Problem
 from horizon_mpc.solvers.nlp_solver import NlpSolver
 
-__all__ = ["IpoptSolver"]
+__all__ = ["IpoptSolver", "hsl_available"]
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +62,16 @@ class IpoptSolver(NlpSolver):
     RANGES = {"max_iter": ">=0", "tol": ">0", "constr_viol_tol": ">0", "print_level": "[0,12]",
               "warm_mu_init": ">0", "warm_bound_push": ">0"}
     _IPOPT_ALIASES = ("max_iter", "tol", "constr_viol_tol", "print_level", "linear_solver")
+    CHOICES = {**NlpSolver.CHOICES,
+               "linear_solver": ("mumps", "spral", "ma27", "ma57", "ma77", "ma86", "ma97")}
+
+    def _check_together(self, opts: dict[str, Any]) -> None:
+        # IPOPT loads HSL at the solve and failed there ('Invalid_Option', cost 0)
+        if opts["linear_solver"].startswith("ma") and not hsl_available():
+            raise ValueError(f"option 'linear_solver' of solver 'ipopt': "
+                             f"{opts['linear_solver']!r} needs the HSL library (libhsl or "
+                             "libcoinhsl), which is not installed here; use 'mumps' or "
+                             "'spral'")
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
@@ -140,3 +152,8 @@ class IpoptSolver(NlpSolver):
                   s.constraint_violation)
         return s.success
 
+
+def hsl_available() -> bool:
+    """Whether IPOPT can load HSL's linear solvers (a libhsl or libcoinhsl on the library
+    path)."""
+    return any(ctypes.util.find_library(name) for name in ("hsl", "coinhsl"))

@@ -999,8 +999,20 @@ class IlqrSolver(Solver):
         self._shifted = True
 
     def reset(self) -> None:
-        """Forget the multipliers (:meth:`reset_multipliers`), as every solver's reset."""
+        """A cold start for the next solve, as a fresh solver's: the multipliers
+        (:meth:`reset_multipliers`), and what the last solves learned of the problem (the
+        'auto' box mode they kept, rows they moved to the augmented Lagrangian)."""
         self.reset_multipliers()
+        self._auto_box = self._box_kept = False
+        self._box_from = None
+        self._demoted[:] = False
+
+    def set_option(self, key: str, value: Any) -> None:
+        """Change one option between solves (``mu_init`` also restarts the regularisation
+        at it: it was taken at the build and at resets only)."""
+        super().set_option(key, value)
+        if key == "mu_init":
+            self.mu = value
 
     def reset_multipliers(self) -> None:
         """Forget the augmented-Lagrangian state (e.g. after a solver failure)."""
