@@ -614,6 +614,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ParameterException, SettingError) as exc:  # a -p/-s value a node refuses
         log.error("cannot run: %s", exc)
         return 2
+    except (KeyError, FileNotFoundError, ValueError) as exc:
+        # a robot config the nodes cannot start with (a foot that is no link, a missing
+        # URDF, a posture outside the joint limits): it was a traceback, exit 1
+        log.error("cannot run: %s", exc.args[0] if isinstance(exc, KeyError) and exc.args
+                  else exc)
+        return 2
     written: list[Path] = []
     try:
         summary = summarise(rec, segments, mode=args.mode, robot=args.robot)

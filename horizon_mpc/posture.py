@@ -64,6 +64,20 @@ def _set_joint(model: pin.Model, q: np.ndarray, name: str, value: float) -> None
         q[joint.idx_q : joint.idx_q + 2] = (np.cos(value), np.sin(value))
 
 
+def _outside_limits(model: pin.Model, q: np.ndarray) -> list[str]:
+    """The one-dimensional joints of ``q`` outside their (non-empty) position limits."""
+    out = []
+    for j in range(2, model.njoints):
+        joint = model.joints[j]
+        if joint.nq != 1:
+            continue
+        i = joint.idx_q
+        lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+        if lo < hi and not lo - 1e-9 <= q[i] <= hi + 1e-9:
+            out.append(f"{model.names[j]}={q[i]:g} (limits [{lo:g}, {hi:g}])")
+    return out
+
+
 def standing_configuration(
     cfg: RobotConfig, model: pin.Model | None = None, clearance: float = 0.0
 ) -> tuple[pin.Model, np.ndarray]:
@@ -78,6 +92,14 @@ def standing_configuration(
 
     Returns:
         ``(model, q)``: the free-flyer Pinocchio model and the configuration, shape (nq,).
+
+    Raises:
+        ValueError: a ``nominal_posture`` without an SRDF to read it from (a config with
+            ``urdf_path:`` and no ``robot:``) while joints are left unset, or a posture
+            joint outside its URDF limits (a robot started there was refused as a wrong
+            reading by the MPC at every state, and a lockstep simulator waited forever).
+        KeyError: a foot frame the model does not have (the message lists its links).
+        ValueError: also a ``base_link`` that is neither the root link nor fixed to it.
     """
     model = model if model is not None else load_pin_model(cfg)
     q = pin.neutral(model)
@@ -93,14 +115,32 @@ def standing_configuration(
         _set_joint(model, q, name, value)
     unset = [model.names[j] for j in range(2, model.njoints) if model.joints[j].nq
              and model.names[j] not in values]
+    if unset and cfg.nominal_posture and srdf is None:
+        raise ValueError(f"config {cfg.name!r}: nominal_posture {cfg.nominal_posture!r} is an "
+                         "SRDF group state, and there is no SRDF to read it from (no "
+                         "example-robot-data 'robot:'): give every joint in nominal_joints "
+                         f"(missing: {unset})")
     if values and unset:
         log.warning("config %r: the nominal posture leaves joints %s of the model at 0 (is "
                     "the URDF the config's robot?)", cfg.name, unset)
+    outside = _outside_limits(model, q)
+    if outside:
+        raise ValueError(f"config {cfg.name!r}: the nominal posture puts joints outside their "
+                         f"URDF limits: {', '.join(outside)} (a joint the posture leaves out "
+                         "is at 0): set them in nominal_joints")
     data = model.createData()
     pin.framesForwardKinematics(model, data, q)
-    missing = [f for f in cfg.feet if not model.existFrame(f)]
+    links = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+    missing = [f for f in cfg.feet if f not in links]
     if missing:
-        raise KeyError(f"config {cfg.name!r}: unknown foot frames {missing}")
+        raise KeyError(f"config {cfg.name!r}: foot frames {missing} are not links of the URDF "
+                       f"(its links: {links})")
+    # the base: the root link or one fixed to it (its pose and twist are the odometry's)
+    base_links = [f.name for f in model.frames
+                  if f.type == pin.FrameType.BODY and f.parentJoint <= 1]
+    if cfg.base_link not in base_links:
+        raise ValueError(f"config {cfg.name!r}: base_link {cfg.base_link!r} is not the URDF's "
+                         f"root link or a link fixed to it (those are: {base_links})")
     lowest = min(data.oMf[model.getFrameId(f)].translation[2] for f in cfg.feet)
     q[2] = clearance - lowest
     return model, q

@@ -769,3 +769,22 @@ def test_an_interrupted_realtime_run_keeps_the_mpc_process_figures(tmp_path, mon
     assert summary["interrupted"] is True
     assert child["pid"] != os.getpid() and child["memory_mb"]["peak"] > 50
     assert child["cpu_s"] > 0.0 and not process_exists(child["pid"])
+
+
+def test_a_robot_config_the_nodes_cannot_start_with_is_one_line_exit_2(tmp_path, caplog):
+    """A foot that is no link, a missing URDF: tracebacks, exit 1 (the nodes said it in one
+    line)."""
+    from horizon_mpc.closed_loop import main
+
+    bad = tmp_path / "bad.yaml"
+    for text, said in (("robot: go2\nfeet: [FL_foot, FR_footx, RL_foot, RR_foot]\n",
+                        "['FR_footx'] are not links of the URDF"),
+                       (f"urdf_path: {tmp_path / 'none.urdf'}\nfeet: [a, b, c, d]\n",
+                        "none.urdf")):
+        bad.write_text(text)
+        caplog.clear()
+        with caplog.at_level("ERROR"):
+            assert main(["--robot", str(bad), "--duration", "0.1", "--no-gif",
+                         "--out", str(tmp_path / "out")]) == 2
+        assert "cannot run: " in caplog.text and said in caplog.text
+        assert "Traceback" not in caplog.text

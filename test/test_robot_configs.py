@@ -148,3 +148,54 @@ def test_each_quadruped_stands_at_its_nominal_height(robot):
     assert t[-1] >= 3.0 - 1e-9
     assert q[-1, 2] == pytest.approx(h0, rel=0.04), f"{robot} stands at {q[-1, 2]:.4f} m"
     assert np.hypot(*(q[-1, :2] - q[0, :2])) < 0.05  # and stays about where it is
+
+
+def _config(tmp_path: Path, text: str):
+    path = tmp_path / "mine.yaml"
+    path.write_text(text)
+    return load_robot_config(str(path))
+
+
+def test_a_config_the_robot_cannot_stand_with_is_refused_by_name(tmp_path):
+    """A user's config (an auditor's): a1 with urdf_path: in place of robot: kept
+    'nominal_posture: standing' with no SRDF to read it from: every joint at 0, calves
+    outside their limits; the MPC refused every state and the lockstep simulator waited
+    10 s per step. A base_link on a leg (odometry of the root labelled as the hip) and a
+    joint named as a foot were taken too."""
+    from horizon_mpc.posture import standing_configuration
+    from horizon_mpc.robots import example_robot_files
+
+    a1 = example_robot_files("a1").urdf
+    feet = "[FL_foot, FR_foot, RL_foot, RR_foot]"
+    cfg = _config(tmp_path, f"urdf_path: {a1}\nbase_link: trunk\nfeet: {feet}\n"
+                            "nominal_posture: standing\n")
+    with pytest.raises(ValueError, match="no SRDF to read it from .* nominal_joints"):
+        standing_configuration(cfg)
+    cfg = _config(tmp_path, f"urdf_path: {a1}\nbase_link: trunk\nfeet: {feet}\n"
+                            "nominal_posture: null\n")
+    with pytest.raises(ValueError, match=r"outside their URDF limits: FL_calf_joint=0 "):
+        standing_configuration(cfg)
+    cfg = _config(tmp_path, f"robot: go2\nbase_link: FL_hip\nfeet: {feet}\n")
+    with pytest.raises(ValueError, match="base_link 'FL_hip' is not the URDF's root link"):
+        standing_configuration(cfg)
+    cfg = _config(tmp_path, "robot: go2\nbase_link: base\n"
+                            "feet: [FL_calf_joint, FR_foot, RL_foot, RR_foot]\n")
+    with pytest.raises(KeyError, match=r"\['FL_calf_joint'\] are not links of the URDF"):
+        standing_configuration(cfg)
+    # the working form of the same: every joint named
+    joints = {f"{leg}_{j}_joint": v for leg in ("FL", "FR", "RL", "RR")
+              for j, v in (("hip", 0.0), ("thigh", 0.8), ("calf", -1.5))}
+    cfg = _config(tmp_path, f"urdf_path: {a1}\nbase_link: trunk\nfeet: {feet}\n"
+                            f"nominal_posture: null\nnominal_joints: {joints}\n")
+    _, q = standing_configuration(cfg)
+    assert q[2] > 0.2
+
+
+def test_the_walking_mpc_names_what_it_cannot_take():
+    """ur5 (a fixed-base arm) was refused as having 'continuous joints', which it has not;
+    a continuous joint was not named."""
+    from horizon_mpc.nodes.mpc_node import _check_joints
+
+    with pytest.raises(ValueError, match="'ur5' has a fixed base"):
+        _check_joints(RobotModel.from_example("ur5"))
+    _check_joints(RobotModel.from_example("go2"))

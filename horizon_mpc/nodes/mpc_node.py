@@ -239,6 +239,11 @@ class MpcNode(MpcParameters, Node):
             mpc.set_gait(g.name, g.step_duration, g.step_height, g.duty_factor)
             mpc.set_stand_when_idle(settings.stand_when_idle)
             mpc.wp.set_weights(settings.weights)
+        if len(cfg.feet) != 4:
+            self.get_logger().warning(
+                f"{len(cfg.feet)} feet: the gaits and the contact model are a quadruped's "
+                "(point feet; the gaits' phases go over the feet in order); talos on its two "
+                "soles trotted the default profile and fell at 12.7 s (doc/mpc_node.md)")
         source = model_source(cfg, str(self._p("urdf_path")), str(self._p("robot_description")))
         self.get_logger().info(
             f"built the {cfg.name} walking MPC (model from {source}) in "
@@ -748,8 +753,18 @@ def robot_model(cfg: RobotConfig, urdf_path: str = "",
 
 
 def _check_joints(model: RobotModel) -> None:
-    if model.nq != 7 + len(model.joint_names):
-        raise ValueError("mpc_node needs one q entry per joint (no continuous joints)")
+    """ValueError unless the walking MPC can take ``model``: a floating base (a legged
+    robot; an arm was refused as having continuous joints) and one q entry per joint."""
+    if not model.floating_base:
+        raise ValueError(f"robot {model.name!r} has a fixed base: the walking MPC needs a "
+                         "legged robot on a floating base")
+    pin_model = model.pin_model
+    continuous = [pin_model.names[j] for j in range(2, pin_model.njoints)
+                  if pin_model.joints[j].nq == 2 and pin_model.joints[j].nv == 1]
+    if continuous or model.nq != 7 + len(model.joint_names):
+        raise ValueError(f"the walking MPC needs one q entry per joint; continuous joints "
+                         f"{continuous} have two (cos, sin): make them revolute with limits "
+                         "in the URDF")
 
 
 def main(args: Sequence[str] | None = None) -> int:
