@@ -1404,8 +1404,8 @@ def test_gait_settings_and_weights_outside_where_the_trot_walked_are_warned_abou
 
 def test_a_control_rate_faster_than_the_nodes_sets_dt_and_the_nodes():
     """At 100 Hz with 0.02 s nodes (half a node a tick) go2 fell; on 0.01 s nodes, 48 of
-    them (the same horizon), it walked, in lockstep and in real time. Below 0.01 s (not
-    seen walking) and for slower rates the config's nodes stay."""
+    them (the same horizon), it walked, in lockstep and in real time; 125 Hz on 60 of 8 ms
+    too. Below 8 ms (not seen walking) and for slower rates the config's nodes stay."""
     from horizon_mpc.nodes.mpc_parameters import horizon_for_rate
 
     assert horizon_for_rate(0.02, 24, 100.0) == pytest.approx((0.01, 48))
@@ -1413,6 +1413,7 @@ def test_a_control_rate_faster_than_the_nodes_sets_dt_and_the_nodes():
     assert dt == pytest.approx(1 / 83) and n == 40
     assert horizon_for_rate(0.02, 24, 50.0) is None  # one node a tick
     assert horizon_for_rate(0.02, 24, 25.0) is None  # two
+    assert horizon_for_rate(0.02, 24, 125.0) == pytest.approx((0.008, 60))
     assert horizon_for_rate(0.02, 24, 200.0) is None  # 5 ms nodes: never seen walking
 
 

@@ -51,7 +51,7 @@ MIN_DUTY_FACTOR = 0.05  # the smallest duty_factor accepted (0 stands for the ga
 
 # where the walking MPC was seen to walk and to fall (go2, lockstep, forward 0.3 m/s and a
 # turn; doc/mpc_node.md): the accepted ranges are wider, the node warns outside these
-WALKED_DT = (0.01, 0.035)  # s; 0.04 fell
+WALKED_DT = (0.008, 0.035)  # s; 0.04 fell; 0.008 (60 nodes, 125 Hz) walked, session 24
 # 20 and 24 walked; 16 walked in lockstep but fell in real time (3.4-3.8 s, 3 of 3 runs,
 # session 20); 12 fell
 WALKED_MIN_NODES = 20
@@ -121,7 +121,8 @@ def horizon_for_rate(dt: float, n_nodes: int, control_rate: float) -> tuple[floa
     control period as the node interval and as many nodes as keep the horizon's duration,
     when that period is one the walking MPC was seen to walk with (``WALKED_DT``); else
     None. A tick of a fraction of a node made go2 fall (100 Hz at dt 0.02 s); at dt 0.01 s
-    and 48 nodes it walked, in lockstep and in real time (doc/mpc_node.md)."""
+    and 48 nodes it walked, and at 0.008 s and 60 nodes (125 Hz), in lockstep and in real
+    time (doc/mpc_node.md)."""
     period = 1.0 / control_rate
     if not (period < dt - 1e-12 and period >= WALKED_DT[0] - 1e-12):
         return None
