@@ -95,11 +95,11 @@ def standing_configuration(
 
     Raises:
         ValueError: a ``nominal_posture`` without an SRDF to read it from (a config with
-            ``urdf_path:`` and no ``robot:``) while joints are left unset, or a posture
-            joint outside its URDF limits (a robot started there was refused as a wrong
-            reading by the MPC at every state, and a lockstep simulator waited forever).
+            ``urdf_path:`` and no ``robot:``) while joints are left unset; a posture joint
+            outside its URDF limits (a robot started there was refused as a wrong reading
+            by the MPC at every state, and a lockstep simulator waited forever); a
+            ``base_link`` that is neither the root link nor fixed to it.
         KeyError: a foot frame the model does not have (the message lists its links).
-        ValueError: also a ``base_link`` that is neither the root link nor fixed to it.
     """
     model = model if model is not None else load_pin_model(cfg)
     q = pin.neutral(model)

@@ -171,6 +171,7 @@ class MpcNode(MpcParameters, Node):
         self._base_frames = {mpc.cfg.base_link, mpc.model.root_link}
 
         self._create_interfaces()
+
     def _settings_from_parameters(self, cfg: RobotConfig, mpc: WalkingMpc | None
                                   ) -> MpcSettings:
         """Declare the parameters (defaults from ``cfg``'s ``mpc:`` section, or the given

@@ -185,9 +185,11 @@ class MpcParameters:
         n_nodes, dt = int(st.n_nodes), float(st.dt)
         given = parameter_overrides(self)
         rate = given["control_rate"].value if "control_rate" in given else None
-        chosen = (horizon_for_rate(dt, n_nodes, float(rate)) if rate_sets_horizon
-                  and "dt" not in given and isinstance(rate, (int, float))
-                  and not isinstance(rate, bool) and rate > 0 else None)
+        chosen = None
+        # (a rate of the wrong type or range is refused by its own declaration below)
+        if rate_sets_horizon and "dt" not in given and isinstance(rate, (int, float)) \
+                and not isinstance(rate, bool) and rate > 0:
+            chosen = horizon_for_rate(dt, n_nodes, float(rate))
         if chosen is not None:
             dt, n_nodes = chosen[0], (n_nodes if "n_nodes" in given else chosen[1])
             self.get_logger().info(

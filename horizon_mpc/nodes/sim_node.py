@@ -275,8 +275,8 @@ class SimNode(Node):
                     cfg = load_robot_config(self._param("config") or self._param("robot"))
                 default = float(default.read(cfg))
             declare_parameter(self, name, default, description, *rng, read_only=True)
-        assert cfg is not None  # SIM_PARAMETERS has FromConfig defaults
-        return cfg
+        return cfg if cfg is not None else load_robot_config(
+            self._param("config") or self._param("robot"))
 
     def _param(self, name: str) -> object:
         try:

@@ -128,11 +128,7 @@ class GnSqpSolver(NlpSolver):
         self._evaluate = cs.Function("gn_evaluate", [w, P], [f, g], ["w", "p"], ["f", "g"])
         self._H_sp, self._A_sp = H.sparsity(), J_g.sparsity()
         self._qp: dict[bool, cs.Function] = {}
-        try:  # built now: options the QP plugin refuses are named here, not at a solve
-            self._qp_solver()
-        except RuntimeError as exc:
-            raise ValueError(f"gnsqp: the QP solver {self.opts['qp_solver']!r} refuses its "
-                             f"options {self.opts['qp_options']!r}: {_first_line(exc)}") from None
+        self._build_qp()
 
     def _check_problem(self, prb: Problem) -> None:
         general = [n for n, c in prb.costs.items() if isinstance(c, GeneralCost)]
@@ -146,18 +142,25 @@ class GnSqpSolver(NlpSolver):
 
     def set_option(self, key: str, value: Any) -> None:
         """Change one option; the QP solver is rebuilt (and its options checked) at once."""
-        previous = self.opts[key] if key in self.opts else None
+        previous = self.opts.get(key)
         super().set_option(key, value)
         if key in ("qp_solver", "qp_options", "regularization"):
-            self._qp.clear()
             try:
-                self._qp_solver()
-            except RuntimeError as exc:  # CasADi's refusal of a QP option
+                self._build_qp()
+            except ValueError:
                 self.opts[key] = previous
-                self._qp.clear()
-                raise ValueError(f"gnsqp: {key} {value!r}: the QP solver "
-                                 f"{self.opts['qp_solver']!r} refuses its options: "
-                                 f"{_first_line(exc)}") from None
+                raise
+
+    def _build_qp(self) -> None:
+        """(Re)build the QP solver now: options its plugin refuses raise ValueError here,
+        not at the next solve."""
+        self._qp.clear()
+        try:
+            self._qp_solver()
+        except RuntimeError as exc:  # CasADi's refusal of a QP option
+            self._qp.clear()
+            raise ValueError(f"gnsqp: the QP solver {self.opts['qp_solver']!r} refuses its "
+                             f"options {self.opts['qp_options']!r}: {_first_line(exc)}") from None
 
     def _qp_solver(self, elastic: bool = False) -> cs.Function:
         if elastic not in self._qp:

@@ -40,7 +40,7 @@ from horizon_mpc.solvers.base import Solver
 from horizon_mpc.solvers.ilqr import merit, riccati, riccati_c
 from horizon_mpc.solvers.ilqr.equality import EqualityLayout, project
 from horizon_mpc.solvers.ilqr.evaluation import CompiledEvaluation
-from horizon_mpc.solvers.ilqr.lagrangian import AugmentedLagrangian
+from horizon_mpc.solvers.ilqr.lagrangian import INEQUALITY_MODES, AugmentedLagrangian
 from horizon_mpc.solvers.ilqr.lq_step import CompiledLqStep
 from horizon_mpc.solvers.ilqr.stages import build_stage_model, check_supported
 
@@ -158,7 +158,7 @@ class IlqrSolver(Solver):
 
     CHOICES = {"equality": ("projection", "lagrangian"),
                "input_bounds": ("auto", "box", "lagrangian"),
-               "inequality": ("lagrangian", "barrier")}
+               "inequality": INEQUALITY_MODES}
     # built into the stage model and the multipliers' rows at construction
     BUILD_ONLY = ("codegen", "equality", "inequality", "barrier_mu", "barrier_delta",
                   "rho_init")
