@@ -651,6 +651,30 @@ def test_an_array_weight_set_as_ros2_param_set_delivers_it_applies(harness):
     h.spin_until(lambda: h.trajectories)
 
 
+
+def test_an_integer_set_live_on_a_float_parameter_is_taken_as_that_float(harness):
+    """'ros2 param set /mpc max_vx 1' sends an integer, which rclpy refused on a float
+    parameter; a float list given as integers likewise. Other types still fail."""
+    h = harness()
+    names = ("max_vx", "w_base_linear_velocity", "w_posture")
+    before = [Parameter(n, value=h.node.get_parameter(n).value) for n in names]
+    wire = [Parameter.from_parameter_msg(Parameter(name, value=value).to_parameter_msg())
+            for name, value in (("max_vx", 1), ("w_base_linear_velocity", [10, 20, 5]),
+                                ("w_posture", 3))]
+    assert [p.type_ for p in wire] == [Parameter.Type.INTEGER, Parameter.Type.INTEGER_ARRAY,
+                                       Parameter.Type.INTEGER]
+    assert all(r.successful for r in h.node.set_parameters(wire))
+    st_ = h.node.mpc.settings
+    assert st_.max_velocity[0] == 1.0 and st_.weights.posture == 3.0
+    assert st_.weights.base_linear_velocity == [10.0, 20.0, 5.0]
+    assert h.node.get_parameter("max_vx").type_ == Parameter.Type.DOUBLE
+    text = h.node.set_parameters([Parameter("max_vx", value="fast")])[0]
+    assert not text.successful and st_.max_velocity[0] == 1.0
+    # an integer parameter keeps refusing a float
+    assert not h.node.set_parameters([Parameter("publish_points", value=6.0)])[0].successful
+    assert all(r.successful for r in h.node.set_parameters(before))
+
+
 @pytest.mark.parametrize("second_after", [None, 0.1])
 def test_sigterm_exits_cleanly_with_code_0(second_after):
     """Also with a second signal 100 ms after the first (ros2 launch forwarding its own

@@ -1,5 +1,5 @@
 """Declaring the nodes' parameters: descriptions, ranges, read-only flags, and an integer
-accepted where a float is declared."""
+accepted where a float is declared (at start-up and in a live set)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-__all__ = ["declare", "float_range", "int_range", "parameter_overrides"]
+__all__ = ["accept_integers_for_floats", "declare", "float_range", "int_range",
+           "parameter_overrides"]
 
 
 def parameter_overrides(node: Node) -> dict[str, Parameter]:
@@ -59,3 +60,26 @@ def declare(node: Node, name: str, default: object, description: str,
         # a weight list written without dots (-p "w_base_linear_velocity:=[1,2,3]")
         overrides[name] = Parameter(name, value=[float(x) for x in given.value])
     node.declare_parameter(name, default, desc)
+
+
+def _as_float(node: Node, param: Parameter) -> Parameter:
+    """``param`` as the float (list) its declared parameter holds, when it is an integer
+    (list); else unchanged."""
+    if not node.has_parameter(param.name):
+        return param  # rclpy refuses it as undeclared, with its own reason
+    declared = node.get_parameter(param.name).type_
+    if param.type_ == Parameter.Type.INTEGER and declared == Parameter.Type.DOUBLE:
+        return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
+    if (param.type_ == Parameter.Type.INTEGER_ARRAY
+            and declared == Parameter.Type.DOUBLE_ARRAY):
+        return Parameter(param.name, Parameter.Type.DOUBLE_ARRAY,
+                         [float(x) for x in param.value])
+    return param
+
+
+def accept_integers_for_floats(node: Node) -> None:
+    """Let a live set give an integer to a float parameter and an integer list to a
+    float-list one (``ros2 param set /mpc max_vx 1``: the CLI types ``1`` as an integer,
+    which rclpy refuses on a float parameter); other types still fail on the type."""
+    node.add_pre_set_parameters_callback(
+        lambda params: [_as_float(node, p) for p in params])

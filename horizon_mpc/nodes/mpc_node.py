@@ -37,7 +37,7 @@ from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.model import RobotModel
 from horizon_mpc.mpc.controller import Plan, WalkingMpc
 from horizon_mpc.nodes.conversions import NS_PER_S, time_to_ns
-from horizon_mpc.nodes.declare import parameter_overrides
+from horizon_mpc.nodes.declare import accept_integers_for_floats, parameter_overrides
 from horizon_mpc.nodes.mpc_inputs import (
     LayoutNote,
     base_from_odometry,
@@ -267,6 +267,7 @@ class MpcNode(MpcParameters, Node):
                                      state_qos),
             self.create_subscription(Odometry, "odom", self._on_odom, state_qos),
             self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10))
+        accept_integers_for_floats(self)  # ros2 param set /mpc max_vx 1
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if self.trigger == "timer":
             self._timer = self.create_timer(self.period, self.tick)
