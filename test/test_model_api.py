@@ -42,6 +42,28 @@ def test_arms_are_fixed_base_by_default():
         assert m.nq == m.nv == n_joints
 
 
+
+_WORLD_ARM = """<robot name="arm"><link name="world"/>
+<joint name="fix" type="fixed"><parent link="world"/><child link="base"/></joint>
+<link name="base"/>
+<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 1 0"/>
+<limit lower="-3" upper="3" effort="10" velocity="5"/></joint>
+<link name="l1"><inertial><mass value="1"/><origin xyz="0 0 0.5"/>
+<inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link></robot>"""
+
+
+def test_a_free_flyer_above_a_world_root_link_is_warned_about(caplog):
+    """from_urdf's default is a floating base: an arm fixed to 'world' silently got one."""
+    with caplog.at_level("WARNING", logger="horizon_mpc.model.loading"):
+        floating = RobotModel.from_urdf(_WORLD_ARM)
+    assert (floating.nq, floating.nv) == (8, 7)
+    assert "root link is 'world'" in caplog.text and "floating_base=False" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="horizon_mpc.model.loading"):
+        fixed = RobotModel.from_urdf(_WORLD_ARM, floating_base=False)
+        RobotModel.from_example("go2")
+    assert (fixed.nq, fixed.nv) == (1, 1) and not caplog.text
+
 def test_limits_come_from_the_urdf_and_base_is_unbounded():
     m = model("go2")
     pm = m.pin_model

@@ -350,6 +350,66 @@ def test_nan_bounds_and_crossed_one_sided_bounds_are_refused(prb):
         con.set_bounds(np.nan, 0.0)
 
 
+
+@pytest.mark.parametrize("solver", ["ipopt", "gnsqp", "ilqr"])
+def test_a_bound_no_value_can_meet_is_refused_where_it_is_set(prb, solver):
+    """lb = +inf or ub = -inf used to pass, then IPOPT raised CasADi's error and the others
+    ended with 'not finite at the initial guess' or max_iter."""
+    x, u = prb.get_variable("x"), prb.get_variable("u")
+    prb.create_cost("effort", u)
+    for refuse in (lambda: x.set_bounds([np.inf, -np.inf], [np.inf, np.inf], nodes=5),
+                   lambda: x.set_upper_bounds(-np.inf, nodes=3),
+                   lambda: x.set_lower_bounds(np.inf),
+                   lambda: prb.create_constraint("c", x[0], bounds=(np.inf, np.inf)),
+                   lambda: prb.create_constraint("d", x[0], bounds=(-np.inf, -np.inf))):
+        with pytest.raises(ValueError, match=r"lower bound of \+inf or an upper bound of -inf"):
+            refuse()
+    assert not {"c", "d"} & set(prb.constraints)
+    x.set_bounds(0.0, 0.0, nodes=0)
+    x.set_bounds([-np.inf, -1.0], [np.inf, 1.0])  # no bound on one side is fine
+    solver_ = make_solver(solver, prb)
+    assert solver_.solve(), solver_.stats.status
+
+
+@pytest.mark.parametrize("name", ["effort__u", "_c", "my cost", "jac", "hess", "null", "2c",
+                                  "coût", ""])
+def test_a_term_name_casadi_cannot_take_is_refused_when_the_term_is_created(prb, name):
+    """It became a CasADi Function's name: make_solver raised CasADi's own error."""
+    with pytest.raises(ValueError, match="term name .* is not valid"):
+        prb.create_cost(name, prb.get_variable("u"))
+    assert not prb.costs
+
+
+def test_term_name_makes_frame_names_valid():
+    from horizon_mpc.problem.terms import term_name
+
+    assert term_name("leg-1.foot", "velocity") == "leg_1_foot_velocity"
+    assert term_name("LF_FOOT", "no_force") == "LF_FOOT_no_force"
+    assert term_name("1_foot__x", "touchdown") == "t_1_foot_x_touchdown"
+    assert all(cs.Function.check_name(term_name(f, "c")) for f in ("_a", "b__", "é", "a b"))
+
+
+def test_creation_bounds_may_give_one_column_per_active_node(prb):
+    x, u = prb.get_variable("x"), prb.get_variable("u")
+    c = prb.create_constraint("some", x, nodes=[5, 2],
+                              bounds=(np.array([[0, 1], [2, 3]]), np.full((2, 2), 9.0)))
+    np.testing.assert_array_equal(c.lower_bounds[:, [2, 5]], [[0, 1], [2, 3]])  # sorted nodes
+    np.testing.assert_array_equal(c.upper_bounds[:, [2, 5]], 9.0)
+    e = prb.create_constraint("inputs", u, bounds=(-np.ones((1, 10)), np.ones((1, 10))))
+    np.testing.assert_array_equal(e.lower_bounds[0, :10], -1.0)
+    full = prb.create_constraint("full", x[0], bounds=(-np.ones((1, 11)), np.ones((1, 11))))
+    np.testing.assert_array_equal(full.upper_bounds, 1.0)
+    with pytest.raises(ValueError, match=r"\[3\] columns; give one per node 0..N \(11\) or "
+                                         r"one per active node \(2\)"):
+        prb.create_constraint("bad", x, nodes=[2, 5], bounds=(np.zeros((2, 3)), 1.0))
+
+
+def test_a_constant_constraint_is_refused(prb):
+    with pytest.raises(ValueError, match="constraint 'one' is a constant"):
+        prb.create_constraint("one", 1.0)
+    with pytest.raises(ValueError, match="is a constant"):
+        prb.create_constraint("zero", prb.get_variable("x") * 0)
+
 @pytest.mark.parametrize("build, error, match", [
     (lambda p, x, u: p.create_constraint("c", cs.MX.sym("m", 1)), TypeError, "MX"),
     (lambda p, x, u: p.create_cost("c", "x"), TypeError, "string 'x'"),

@@ -14,6 +14,7 @@ import numpy as np
 
 from horizon_mpc.model import RobotModel
 from horizon_mpc.problem import Constraint, Cost, Parameter, Problem
+from horizon_mpc.problem.terms import term_name
 
 __all__ = [
     "ContactTerms",
@@ -115,17 +116,17 @@ def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q, v, f, mu: 
         lin, ang = model.frame_velocity(foot, ref="LOCAL_WORLD_ALIGNED")(q, v)
         if foot_radius > 0.0:
             lin = lin + cs.cross(ang, cs.DM([0.0, 0.0, -foot_radius]))
-        terms.velocity[foot] = prb.create_constraint(f"{foot}_velocity", lin)
+        terms.velocity[foot] = prb.create_constraint(term_name(foot, "velocity"), lin)
         terms.friction[foot] = prb.create_constraint(
-            f"{foot}_friction", cs.mtimes(cs.DM(cone), fi), bounds=(0.0, np.inf))
-        terms.zero_force[foot] = prb.create_constraint(f"{foot}_no_force", fi)
+            term_name(foot, "friction"), cs.mtimes(cs.DM(cone), fi), bounds=(0.0, np.inf))
+        terms.zero_force[foot] = prb.create_constraint(term_name(foot, "no_force"), fi)
         if clearance:
             pos, _ = model.fk(foot)(q)
             res = pos[2] - swing_z[i]
             if clearance == "constraint":
-                terms.clearance[foot] = prb.create_constraint(f"{foot}_clearance", res)
+                terms.clearance[foot] = prb.create_constraint(term_name(foot, "clearance"), res)
             else:
-                terms.clearance[foot] = prb.create_cost(f"{foot}_clearance", res,
+                terms.clearance[foot] = prb.create_cost(term_name(foot, "clearance"), res,
                                                         weight=clearance_weight)
     return terms
 

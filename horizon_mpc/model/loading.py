@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import sys
 import tempfile
@@ -12,6 +13,8 @@ from pathlib import Path
 import pinocchio as pin
 
 __all__ = ["load_pin_model"]
+
+log = logging.getLogger(__name__)
 
 
 def _looks_like_xml(text: str) -> bool:
@@ -42,9 +45,12 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
              else (lambda: pin.buildModelFromUrdf(str(path), *root)))
     with _stderr_captured() as said:
         try:
-            return build()
+            model = build()
         except (ValueError, RuntimeError) as exc:
             error = exc
+        else:
+            _check_root(model, floating_base, source)
+            return model
     # urdfdom prints the reason (a joint without limits, an unknown link) on stderr and
     # raises "does not contain a valid URDF model" only
     reason = "; ".join(line.strip().removeprefix("Error:").strip() for line in said
@@ -76,3 +82,14 @@ def _stderr_captured() -> Iterator[list[str]]:
             if text:
                 sys.stderr.write(text)
             lines.extend(text.splitlines())
+
+
+def _check_root(model: pin.Model, floating_base: bool, source: str) -> None:
+    """Warn about a free-flyer added above a root link called ``world``: by the ROS
+    convention that URDF describes a robot fixed to the world (an arm), and the model
+    gets 7 configuration and 6 velocity entries it should not have."""
+    root = next((f.name for f in model.frames if f.type == pin.FrameType.BODY), None)
+    if floating_base and root == "world":
+        log.warning("%s: the root link is 'world' (a robot fixed to the world) and "
+                    "floating_base=True adds a free-flyer joint above it (nq %d, nv %d); "
+                    "pass floating_base=False for a fixed base", source, model.nq, model.nv)

@@ -29,6 +29,7 @@ from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import touchdown_nodes
 from horizon_mpc.motions.settings import check_settings
 from horizon_mpc.motions.wholebody import robot_model
+from horizon_mpc.problem.terms import term_name
 from horizon_mpc.solvers import make_solver
 
 __all__ = ["WalkSettings", "run_walk", "walk_summary"]
@@ -115,7 +116,7 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
     touchdown = {}
     for foot in wp.feet:
         z = model.fk(foot)(wp.q)[0][2] - float(model.fk(foot)(wp.q_nominal)[0][2])
-        name = f"{foot}_touchdown"
+        name = term_name(foot, "touchdown")
         touchdown[foot] = (prb.create_cost(name, z, nodes=[], weight=st.w_touchdown)
                            if solver == "ilqr" else prb.create_constraint(name, z, nodes=[]))
     t0 = time.perf_counter()

@@ -37,6 +37,7 @@ from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import touchdown_nodes
 from horizon_mpc.posture import standing_configuration
 from horizon_mpc.problem import Constraint, Problem
+from horizon_mpc.problem.terms import term_name
 from horizon_mpc.robots import example_robot_files
 from horizon_mpc.sim.rotations import quat_conjugate, quat_multiply
 from horizon_mpc.solvers import make_solver
@@ -319,9 +320,10 @@ def build_whole_body(model: RobotModel, feet: list[str], n_nodes: int, dt: float
     for i, foot in enumerate(feet):
         z = model.fk(foot)(q)[0][2]
         # floor = ground on stance nodes: the foot lands on the ground
-        touchdown[foot] = prb.create_constraint(f"{foot}_touchdown", z - floor[i], nodes=[])
-        above[foot] = prb.create_constraint(f"{foot}_above_ground", z - floor[i], nodes=[],
-                                            bounds=(0.0, np.inf))
+        touchdown[foot] = prb.create_constraint(term_name(foot, "touchdown"), z - floor[i],
+                                                nodes=[])
+        above[foot] = prb.create_constraint(term_name(foot, "above_ground"), z - floor[i],
+                                            nodes=[], bounds=(0.0, np.inf))
 
     # limits from the URDF (a joint whose lower and upper limits agree is left free: the
     # URDF's way of writing "no limit", e.g. CENTAURO's wheels)

@@ -119,8 +119,13 @@ def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:
 
 def check_bounds(lo: np.ndarray, hi: np.ndarray, what: str) -> None:
     """Raise ValueError when a bound is NaN (no bound is -inf/inf; a NaN bound would be
-    ignored by some solvers and enforced by others) or a lower bound is above its upper."""
+    ignored by some solvers and enforced by others), a lower bound is +inf or an upper
+    one -inf (no value meets them: IPOPT raised, the others failed later with misleading
+    statuses), or a lower bound is above its upper."""
     if np.isnan(lo).any() or np.isnan(hi).any():
         raise ValueError(f"{what}: NaN bound (use -inf/inf for no bound)")
+    if np.isposinf(lo).any() or np.isneginf(hi).any():
+        raise ValueError(f"{what}: a lower bound of +inf or an upper bound of -inf (no value "
+                         "meets it; -inf/inf on the other side is no bound)")
     if np.any(lo > hi):
         raise ValueError(f"{what}: lower bound above upper bound")

@@ -413,8 +413,12 @@ class Problem:
         if self._finalized:
             raise RuntimeError(f"cannot add {name!r}: the problem is already built into a "
                                "solver; add every constraint and cost first")
-        if not isinstance(name, str) or not name:
-            raise ValueError(f"term name must be a non-empty string, got {name!r}")
+        if not isinstance(name, str) or not cs.Function.check_name(name):
+            # the name becomes a CasADi Function's, which rejected it only when a solver
+            # was built, with its own message
+            raise ValueError(f"term name {name!r} is not valid: a letter, then letters, "
+                             "digits and single underscores (ASCII), not 'jac', 'hess' or "
+                             "'null'")
         if name in self.constraints or name in self.costs:
             raise ValueError(f"a constraint or cost called {name!r} already exists")
         expr = self._as_sx(expr, f"{cls.kind} {name!r}")
@@ -425,6 +429,9 @@ class Problem:
                 raise ValueError(f"{cls.kind} {name!r}: expected a column expression, "
                                  f"got shape {expr.shape}")
         self._check_symbols(expr, f"{cls.kind} {name!r}")
+        if cls is Constraint and expr.is_constant():
+            raise ValueError(f"constraint {name!r} is a constant ({expr}): it depends on no "
+                             "variable, so it always holds or makes the problem infeasible")
         uses_input, offsets, valid = self._term_layout(expr)
         if valid.size == 0:
             raise ValueError(f"{cls.kind} {name!r} is valid on no node of the horizon")

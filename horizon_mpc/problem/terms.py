@@ -12,6 +12,7 @@ are ignored.
 from __future__ import annotations
 
 import itertools
+import re
 
 import casadi as cs
 import numpy as np
@@ -25,7 +26,16 @@ from horizon_mpc.problem.nodes import (
 )
 
 __all__ = ["Constraint", "Cost", "GeneralCost", "Term", "revisions", "stacked_active",
-           "stacked_bounds", "stacked_weights"]
+           "stacked_bounds", "stacked_weights", "term_name"]
+
+def term_name(*parts: str) -> str:
+    """A valid term name (:meth:`Problem.create_constraint`) from ``parts`` joined by ``_``,
+    e.g. a URDF frame name and a role: characters other than ASCII letters and digits
+    become single underscores, and a name that would not start with a letter gets ``t_``
+    in front (``term_name("leg-1.foot", "velocity")`` is ``leg_1_foot_velocity``)."""
+    text = re.sub(r"[^0-9A-Za-z]+", "_", "_".join(parts)).strip("_")
+    return text if text[:1].isalpha() else f"t_{text}"
+
 
 # one counter for every term: a term's revision is unique, so a tuple of revisions names
 # the state of a list of terms (what the solvers cache their per-solve reading on)
@@ -123,7 +133,16 @@ class Constraint(Term):
             if not (isinstance(bounds, (tuple, list)) and len(bounds) == 2):
                 raise TypeError(f"constraint {self.name!r}: bounds must be a pair (lb, ub), "
                                 f"got {bounds!r}")
-            self.set_bounds(*bounds)
+            # per-node bounds: (dim, N+1), or one column per active node (as set_bounds
+            # takes them with those nodes)
+            cols = {np.shape(b)[1] for b in bounds if np.ndim(b) == 2} - {1}
+            per_active = bool(cols - {self.n_nodes + 1})
+            if per_active and cols != {self.nodes.size}:
+                raise ValueError(f"constraint {self.name!r}: per-node bounds have "
+                                 f"{sorted(cols)} columns; give one per node 0..N "
+                                 f"({self.n_nodes + 1}) or one per active node "
+                                 f"({self.nodes.size})")
+            self.set_bounds(*bounds, nodes=self.nodes if per_active else None)
 
     def set_bounds(self, lb: Values, ub: Values, nodes: NodeSelection = None) -> None:
         """Set the bounds on ``nodes`` (None: all nodes); scalar, (dim,) or (dim, n_sel)."""

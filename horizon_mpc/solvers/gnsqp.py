@@ -73,6 +73,9 @@ log = logging.getLogger(__name__)
 # elastic steps in a row that cannot reduce the violation before "locally infeasible"
 INFEASIBLE_STEPS = 5
 
+# qrqp's iteration cap of the plain QP: at least this, else one per variable and row
+QRQP_MIN_ITER = 200
+
 # Accurate, quiet settings per QP plugin (the SQP needs precise multipliers).
 QP_DEFAULTS: dict[str, dict[str, Any]] = {
     "qrqp": {"print_iter": False, "print_header": False, "print_info": False,
@@ -167,6 +170,13 @@ class GnSqpSolver(NlpSolver):
             name = self.opts["qp_solver"]
             qp_opts = {**QP_DEFAULTS.get(name, {}), **self.opts["qp_options"]}
             H_sp, A_sp = self._H_sp, self._A_sp
+            if name == "qrqp" and not elastic and "max_iter" not in self.opts["qp_options"]:
+                # an infeasible linearisation ran qrqp to its 10000 iterations (seconds)
+                # before the elastic QP took over; a feasible one needs about one
+                # iteration per active-set change, and one beyond the cap only costs
+                # the elastic QP's step (exact penalty: the same step when feasible)
+                qp_opts["max_iter"] = min(qp_opts["max_iter"],
+                                          max(QRQP_MIN_ITER, H_sp.size1() + A_sp.size1()))
             if elastic:  # slacks s+ and s- on every constraint row
                 ng = A_sp.size1()
                 H_sp = cs.diagcat(H_sp, cs.Sparsity.diag(2 * ng))
