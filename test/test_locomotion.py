@@ -155,6 +155,35 @@ def _perfect_model_ticks(mpc, commands):
         yield plan
 
 
+
+def test_a_gait_change_while_walking_ramps_the_command_down_and_drops_the_pose_lag(
+        walking_mpc):
+    """walk -> trot: the walk tracks ~75 % of its command, its pose lag grew to pose_leash,
+    the change stopped the walk with the ramped command still at 0.2 m/s, and the trot's
+    limits released command and lag at once: go2 lunged to 0.8 m/s for 0.3 (lockstep)
+    and fell in real time."""
+    mpc = walking_mpc
+    ticks = _perfect_model_ticks(mpc, [(0, 0, 0)] * 3 + [(0.3, 0, 0)] * 400)
+    for _ in range(30):
+        next(ticks)
+    assert mpc.scheduler.walking and mpc.cmd[0] == pytest.approx(0.3)
+    mpc.pose_ref[0] += 0.3  # a lag as a walk leaves it
+    try:
+        mpc.set_gait("walk")
+        assert mpc.pose_ref[:2] == pytest.approx(mpc._pose_expected[:2])
+        cmds = []
+        while mpc.scheduler.pending is not None:
+            next(ticks)
+            cmds.append(mpc.cmd[0])
+        # down at the acceleration limit (1 m/s^2: 0.02 m/s per 20 ms tick) while the
+        # swings end, then up again with the new gait
+        assert cmds == pytest.approx([max(0.3 - 0.02 * k, 0.0)
+                                      for k in range(1, len(cmds) + 1)])
+        next(ticks)
+        assert mpc.scheduler.gait.name == "walk" and mpc.cmd[0] > cmds[-1]
+    finally:
+        mpc.set_gait("trot", duty_factor=None)
+
 def _contact_masks(contacts):
     return {f"{kind}/{foot}": term.active
             for kind in ("velocity", "friction", "zero_force", "clearance")
@@ -632,3 +661,37 @@ def test_a_completed_stop_anchors_the_pose_reference_where_the_robot_stands(walk
     assert anchored is not None, "the stop never completed"
     pose_ref, q = anchored
     np.testing.assert_allclose(pose_ref, [q[0], q[1], base_yaw(q)], atol=1e-9)
+
+
+@pytest.mark.slow
+def test_go2_switches_from_walk_to_trot_without_a_lunge():
+    """Lockstep direct loop at 0.3 m/s: trot, walk for 2.5 s, trot again. Before the fix
+    the peak forward speed (over 0.1 s) after walk -> trot was 0.72 m/s here (0.80 after
+    3 s of walk; 0.65 with the pose lag dropped alone); now ~0.5, against ~0.37 when
+    starting from standing."""
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.mpc import WalkingMpc
+    from horizon_mpc.sim.simulator import Simulator
+    from horizon_mpc.sim.trajectory import JointTrajectoryCommand
+
+    cfg = load_robot_config("go2")
+    sim, mpc = Simulator(cfg), WalkingMpc(cfg)
+    dt = mpc.settings.dt
+    h0 = float(sim.state().q[2])
+    gaits, plan, after = {2.5: "walk", 5.0: "trot"}, None, []
+    while (st := sim.state()).time < 6.5:
+        t = st.time
+        for when in [w for w in gaits if t >= w - 1e-9]:
+            mpc.set_gait(gaits.pop(when))
+        cmd = np.array([0.3 if t >= 1.0 else 0.0, 0.0, 0.0])
+        plan = mpc.start(st.q, st.v, t) if plan is None else mpc.update(t, st.q, st.v, cmd)
+        if t >= 5.0:
+            after.append((t, st.q[0], st.q[2]))
+        sim.set_trajectory(JointTrajectoryCommand(
+            sim.joint_names, t, dt * np.arange(6), plan.q[7:, :6].T, plan.v[6:, :6].T,
+            plan.tau_head(6)[6:].T))
+        sim.step(round(dt / sim.dt))
+    t, x, z = np.array(after).T
+    speed = (x[5:] - x[:-5]) / (t[5:] - t[:-5])  # over 0.1 s
+    assert speed.max() < 0.6 and z.min() > 0.85 * h0
+    assert (x[-1] - x[0]) / (t[-1] - t[0]) == pytest.approx(0.3, abs=0.1)

@@ -488,9 +488,12 @@ class WalkingMpc:
         # three numbers: plain floats (numpy's per-call overhead was ~50 us a tick here)
         target = limit_command([c if math.isfinite(c) else 0.0 for c in cmd],
                                self.velocity_limits, st.max_command_norm)
-        if self.scheduler.gait.stands:
+        if self.scheduler.gait.stands or self.scheduler.pending is not None:
             # a gait that never lifts a foot (stand): the command cannot be walked; moving
-            # the base on planted feet slid them (34 deg of yaw, feet dragged 2 cm)
+            # the base on planted feet slid them (34 deg of yaw, feet dragged 2 cm). A gait
+            # change stops the walk first (GaitScheduler.set_gait): ramped down with it,
+            # the command ramps up again with the new gait, where it held on and go2,
+            # stopped by the change, lunged to 0.8 m/s to catch up a 0.3 m/s command
             target = (0.0, 0.0, 0.0)
         for i, (c, amax) in enumerate(zip(target, st.max_acceleration, strict=True)):
             step = amax * dt
@@ -581,6 +584,11 @@ class WalkingMpc:
         g.name, g.step_duration, g.step_height = name, step_duration, step_height
         g.duty_factor = None if duty_factor is None else float(duty_factor)
         self.scheduler.set_gait(gait, self.t_last if self.t_last is not None else 0.0)
+        if self.t_last is not None:
+            # the pose reference's lag belongs to the old gait: the walk tracks ~75 % of its
+            # command, so its lag grew to pose_leash, and the trot's higher limits released
+            # it at once (go2 lunged to 0.8 m/s for a 0.3 command, fell in real time)
+            self.pose_ref = np.array(self._pose_expected)
 
     def set_stand_when_idle(self, stand: bool) -> None:
         """With a zero command, keep the feet down (True) or keep the gait stepping in place
