@@ -456,6 +456,7 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
                 rec.wall_time = time.perf_counter() - wall0
                 rec.mpc_process = _process_figures(child, cpu0)  # it was left {} here
                 _copy_ticks(monitor.record, rec)
+                rec.mpc_process["exit_code"] = child.stop()  # as a whole run's summary has
                 rec.mpc_log = child.log_tail(lines=200)
                 raise
             _final_isolation_check(player, rec, t_player)

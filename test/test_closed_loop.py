@@ -757,7 +757,8 @@ def test_a_ctrl_c_while_the_outputs_are_written_keeps_the_summary(tmp_path, monk
 
 @pytest.mark.slow
 def test_an_interrupted_realtime_run_keeps_the_mpc_process_figures(tmp_path, monkeypatch):
-    """The child's pid, memory and CPU were lost ("mpc_process": {}) when Ctrl-C came."""
+    """The child's pid, memory and CPU were lost ("mpc_process": {}) when Ctrl-C came, and
+    its exit code, which a whole run's summary has, until session 25."""
     from horizon_mpc import closed_loop
 
     _interrupt_the_loop_at(monkeypatch, 0.6)
@@ -769,6 +770,7 @@ def test_an_interrupted_realtime_run_keeps_the_mpc_process_figures(tmp_path, mon
     assert summary["interrupted"] is True
     assert child["pid"] != os.getpid() and child["memory_mb"]["peak"] > 50
     assert child["cpu_s"] > 0.0 and not process_exists(child["pid"])
+    assert child["exit_code"] == 0
 
 
 def test_a_robot_config_the_nodes_cannot_start_with_is_one_line_exit_2(tmp_path, caplog):

@@ -490,6 +490,18 @@ def test_a_stale_state_is_not_planned_from(harness):
     assert h.trajectories == [] and h.node.plan is None
 
 
+
+def test_states_stamped_0_are_named_as_unset_stamps(harness, monkeypatch):
+    """A driver leaving header.stamp at 0 got 'the state is 1795703617.896 s old'."""
+    h = harness(state_timeout=0.2)
+    said: list[str] = []
+    monkeypatch.setattr(h.node, "_warn", lambda kind, text: said.append(text))
+    h.publish_state(stamp_ns=0)
+    h.spin_until(lambda: h.node.stale_skips > 0)
+    assert h.trajectories == []
+    assert "joint_states and odom stamped 0: header.stamp unset?" in said[-1]
+    assert mpc_node._unset_hint(5, 7) == ""  # sim time starts at 0: only the stale say so
+
 def test_states_that_stop_arriving_are_reported_stale(harness):
     """Timer trigger: when the states stop, the node publishes nothing new and, once the
     last state is older than state_timeout, counts stale skips and sends a WARN status (it
@@ -998,6 +1010,8 @@ def test_lockstep_states_at_another_period_than_the_nodes_are_explained(context,
         assert "the states come 10 ms apart" in misses[-1]
         assert "one control period (20 ms" in misses[-1]
         assert "sim_node's control_period" in misses[-1]
+        # a free-running stream (an auditor's 500 Hz sim_node) is told to use the timer
+        assert "free-running state stream" in misses[-1] and "trigger 'timer'" in misses[-1]
     finally:
         walking_mpc.settings.prepare_ahead = False  # the fixture is shared
         node.destroy_node()
@@ -1072,6 +1086,47 @@ def test_states_off_the_tick_grid_do_not_make_the_ticks_drift_back(context, walk
         walking_mpc.settings.prepare_ahead = False  # the fixture is shared
         node.destroy_node()
 
+
+
+def test_separate_drivers_states_get_the_prepared_feedback_steps(context, walking_mpc):
+    """joint_states and odom from separate drivers never share a stamp: the newest of each
+    was taken, and when both were past the prepared time by more than feedback_tolerance
+    (a timer callback late, states at ~250 Hz) the tick ran whole although a state of each
+    within the tolerance had come (28-38 of 50 ticks whole at 200-250 Hz in an auditor's
+    run). The joint state and the base state nearest the prepared time serve it."""
+    node = sim_time_node(context, walking_mpc, trigger="timer", prepare_ahead=True)
+    try:
+        sent = Sent()
+        node._pub_traj, node._pub_path, node._pub_diag = sent, Sent(), Sent()
+        _, q = standing_configuration(node.mpc.cfg)
+        zeros, ms = np.zeros(3), 1_000_000
+
+        def joints(ns: int) -> None:
+            node.get_clock().set_ros_time_override(RosTime(nanoseconds=ns))
+            node._on_joint_state(joint_state_to_msg(time_from_ns(ns), node.joint_names,
+                                                    q[7:], np.zeros(len(q) - 7)))
+
+        def base(ns: int) -> None:
+            node.get_clock().set_ros_time_override(RosTime(nanoseconds=ns))
+            node._on_odom(odometry_to_msg(time_from_ns(ns), q[:3], q[3:7], zeros, zeros))
+
+        joints(10 * NS_PER_S)
+        base(10 * NS_PER_S + ms)
+        assert node.tick()  # the bootstrap
+        misses = node.mpc.prepare_misses
+        for _ in range(5):
+            prepared = node._prepared_ns
+            joints(prepared - ms)
+            base(prepared - 3 * ms // 2)
+            base(prepared + 5 * ms // 2)
+            joints(prepared + 3 * ms)  # both newest past the 2 ms tolerance
+            assert node.tick()
+            assert time_to_ns(sent.msgs[-1].header.stamp) == prepared - 3 * ms // 2
+            assert node.mpc.solver.stats.status == "feedback"
+        assert node.mpc.prepare_misses == misses
+    finally:
+        walking_mpc.settings.prepare_ahead = False  # the fixture is shared
+        node.destroy_node()
 
 def test_prepare_ahead_ticks_are_feedback_steps_stamped_at_their_plan_time(context,
                                                                              walking_mpc):
@@ -1517,6 +1572,15 @@ def test_params_file_sections_that_match_no_node_are_named(tmp_path):
     assert len(notes) == 1 and "['mpc', 'mpc_node']" in notes[0]
     assert unmatched_params_file_sections([*argv[:3], str(tmp_path / "none.yaml")],
                                           "/mpc") == []  # unreadable: rcl's to report
+    # one file for both nodes: the other node's section is not named (both nodes warned
+    # about it); another namespace's still is
+    path.write_text(yaml.safe_dump({"mpc": {"ros__parameters": {"gait": "walk"}},
+                                    "sim": {"ros__parameters": {"kp": 30.0}},
+                                    "r1": {"sim": {"ros__parameters": {"kp": 30.0}}}}))
+    for node in ("/mpc", "/sim"):
+        notes = unmatched_params_file_sections(argv, node)
+        assert len(notes) == 1 and "section(s) ['r1/sim'] match no node" in notes[0]
+    assert "['mpc', 'sim']" in unmatched_params_file_sections(argv, "/r1/sim")[0]
 
 
 def test_node_targeted_parameter_rules_that_match_no_node_are_named():

@@ -477,15 +477,21 @@ class MpcNode(MpcParameters, Node):
 
         Without one at the prepared time (a robot's driver stamps its states when it
         measures them), the pair nearest to it within the MPC's ``feedback_tolerance``
-        (and ``max_extrapolation``), whose feedback step the preparation serves."""
+        (and ``max_extrapolation``), whose feedback step the preparation serves; with
+        separate drivers (no stamp shared), the joint state and the base state nearest to
+        it, each within that window (the plan's stamp is the older)."""
         base_stamps = {b[0]: b for b in self._base_recent}
         pairs = [(j, base_stamps[j[0]]) for j in self._joints_recent if j[0] in base_stamps]
         prepared = self._prepared_ns if self.mpc.prepared_for is not None else None
-        if prepared is not None and pairs:
+        if prepared is not None and self._joints_recent and self._base_recent:
             st = self.mpc.settings
             window = max(st.max_extrapolation, st.feedback_tolerance) * NS_PER_S
-            nearest = min(pairs, key=lambda pair: abs(pair[0][0] - prepared))
-            if abs(nearest[0][0] - prepared) <= window:
+            if pairs:
+                nearest = min(pairs, key=lambda pair: abs(pair[0][0] - prepared))
+            else:  # until session 25 nearly every tick of separate drivers ran whole
+                nearest = tuple(min(recent, key=lambda x: abs(x[0] - prepared))
+                                for recent in (self._joints_recent, self._base_recent))
+            if max(abs(x[0] - prepared) for x in nearest) <= window:
                 return nearest
         if pairs:
             return pairs[-1]
@@ -521,14 +527,15 @@ class MpcNode(MpcParameters, Node):
             # out of order (the node's clock did not go back, as at a simulator reset)
             self.stale_skips += 1
             self._warn("order", f"a state stamped {(self._last_tick_stamp - stamp_ns) / 1e6:.1f}"
-                       " ms before the one the last plan was made from: not planning from it")
+                       " ms before the one the last plan was made from: not planning from it"
+                       + _unset_hint(joints[0], base[0]))
             return False
         age = now_ns / NS_PER_S - t
         self.last_state_age = age
         if age > self.state_timeout:
             return self._skip_stale(age, "stale", f"the state is {age:.3f} s old "
-                                    f"(state_timeout {self.state_timeout:g} s); not planning",
-                                    stamp_ns, now_ns)
+                                    f"(state_timeout {self.state_timeout:g} s); not planning"
+                                    + _unset_hint(joints[0], base[0]), stamp_ns, now_ns)
         # stamped ahead of the node's clock: clocks differ. Either stream: the plan's stamp
         # is the older one's, and a joint_states stream 1 s ahead of a correct odom was
         # planned from without a word
@@ -623,9 +630,11 @@ class MpcNode(MpcParameters, Node):
                 f"the states come {(stamp_ns - previous_ns) / 1e6:g} ms apart, ")
             return text + (f"trigger 'state' ticks on every state, {spacing}and the "
                            f"preparation is for one control period ({self.period * 1e3:g} ms, "
-                           "1 / control_rate) later: make them equal (sim_node's "
-                           "control_period), a whole number of dt "
-                           f"({self.mpc.settings.dt:g} s)")
+                           "1 / control_rate) later. trigger 'state' is for a lockstep "
+                           "simulator that steps one control period per plan: there make "
+                           "them equal (sim_node's control_period), a whole number of dt "
+                           f"({self.mpc.settings.dt:g} s); a free-running state stream "
+                           "(a robot, sim_node without lockstep) needs trigger 'timer'")
         return text + ("no state comes near the tick times (a loaded machine delays them, "
                        "control_rate is not their rate, or their stamps are further apart "
                        "than feedback_tolerance)")
@@ -713,6 +722,14 @@ class MpcNode(MpcParameters, Node):
         }
         self._solve_time_max = 0.0
         self._pub_diag.publish(self._diag.filled(stamp_ns, level, message, values))
+
+
+def _unset_hint(joints_ns: int, base_ns: int) -> str:
+    """What to say of states stamped 0 (a driver that leaves header.stamp unset) when the
+    node's clock is far past them; empty otherwise (sim time starts at 0)."""
+    unset = [name for name, ns in (("joint_states", joints_ns), ("odom", base_ns)) if ns == 0]
+    return (f" ({' and '.join(unset)} stamped 0: header.stamp unset? the driver must stamp "
+            "each message with the time of its measurement)") if unset else ""
 
 
 def message_type_name(msg_type: type) -> str:

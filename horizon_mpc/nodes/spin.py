@@ -133,11 +133,17 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
     return 0
 
 
+#: default names of this package's nodes (mpc_node, sim_node)
+PACKAGE_NODES = ("mpc", "sim")
+
+
 def unmatched_params_file_sections(argv: Sequence[str], fqn: str) -> list[str]:
     """Notes on the sections of the ``--params-file`` files in ``argv`` that set parameters
     of no node named ``fqn`` (fully qualified): rcl ignores them without a word
-    (a file keyed ``mpc_node:`` for the node ``mpc``). Wildcards (``/**``, ``*``) match as
-    in rcl; an unreadable file is rcl's to report."""
+    (a file keyed ``mpc_node:`` for the node ``mpc``). Sections of this package's other
+    nodes (:data:`PACKAGE_NODES`) in the same namespace are not named: a file shared by
+    ``mpc_node`` and ``sim_node``. Wildcards (``/**``, ``*``) match as in rcl; an
+    unreadable file is rcl's to report."""
     notes = []
     for flag, path in itertools.pairwise(argv):
         if flag != "--params-file":
@@ -147,7 +153,12 @@ def unmatched_params_file_sections(argv: Sequence[str], fqn: str) -> list[str]:
                 data = yaml.safe_load(fh)
         except (OSError, yaml.YAMLError):
             continue
-        keys = [k for k in _node_keys(data, []) if not _matches(k, fqn)]
+        # a file shared by this package's nodes (README: one file for both) holds the
+        # other node's section: that one is no mistake
+        namespace = fqn.rsplit("/", 1)[0]
+        siblings = [f"{namespace}/{name}" for name in PACKAGE_NODES]
+        keys = [k for k in _node_keys(data, [])
+                if not any(_matches(k, name) for name in (fqn, *siblings))]
         if keys:
             notes.append(f"--params-file {path}: section(s) {keys} match no node here (this "
                          f"node is {fqn}): their parameters are not applied")
