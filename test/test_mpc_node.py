@@ -369,6 +369,34 @@ def test_a_sim_clock_that_restarts_does_not_silence_the_path(context, walking_mp
     node.destroy_node()
 
 
+
+def test_a_simulator_reset_is_not_blamed_on_clocks_that_differ(context, walking_mpc):
+    """After a simulator restart the new clock's joint state paired with the old clock's
+    odometry: 'odom is stamped 15.454 s ahead of the node's clock ... use_sim_time?'. The
+    states from before the clock went back are dropped; the new pair restarts the MPC."""
+    node = sim_time_node(context, walking_mpc, trigger="timer")
+    said: list[tuple[str, str]] = []
+    node._warn = lambda kind, text: said.append((kind, text))
+    try:
+        node._pub_traj, node._pub_path, node._pub_diag = Sent(), Sent(), Sent()
+        _, q = standing_configuration(node.mpc.cfg)
+        zeros = np.zeros(3)
+        _feed_state(node, 15 * NS_PER_S, q)
+        assert node.tick()
+        _feed_state(node, 15 * NS_PER_S + 16_000_000, q)  # the old simulator's last state
+        new = 20_000_000  # the restarted simulator's first joint state, its odom not yet
+        node.get_clock().set_ros_time_override(RosTime(nanoseconds=new))
+        node._on_joint_state(joint_state_to_msg(time_from_ns(new), node.joint_names, q[7:],
+                                                np.zeros(len(q) - 7)))
+        assert not node.tick()
+        assert [k for k, _ in said] == ["clock_back"] and "went back 14.980 s" in said[0][1], said
+        assert node._base is None and node._joints[0] == new
+        node._on_odom(odometry_to_msg(time_from_ns(new), q[:3], q[3:7], zeros, zeros))
+        assert node.tick() and node._last_tick_stamp == new
+        assert node.stale_skips == 0
+    finally:
+        node.destroy_node()
+
 def test_by_default_diagnostics_go_out_at_10_hz_and_count_the_ticks_between(
         context, walking_mpc):
     node = sim_time_node(context, walking_mpc)

@@ -541,6 +541,8 @@ class MpcNode(MpcParameters, Node):
         # planned from without a word
         ahead_ns, stream = max((joints[0], "joint_states"), (base[0], "odom"))
         ahead = (ahead_ns - now_ns) / NS_PER_S
+        if ahead > self.state_timeout and self._clock_went_back(now_ns):
+            return False
         if ahead > self.state_timeout:
             return self._skip_stale(-ahead, "future", f"{stream} is stamped {ahead:.3f} s "
                                     "ahead of the node's clock (more than state_timeout "
@@ -609,6 +611,22 @@ class MpcNode(MpcParameters, Node):
             self._warn("deadline", f"tick took {work * 1e3:.1f} ms > period "
                        f"{self.period * 1e3:.1f} ms ({self.deadline_misses} misses)")
         self._publish_diagnostics(plan, plan_ns, now_ns)
+        return True
+
+    def _clock_went_back(self, now_ns: int) -> bool:
+        """Whether the node's clock is behind the last plan's state (a simulator reset): the
+        states received before it are then dropped, with a note, rather than blamed on
+        clocks that differ (one stream's new state and the other's old one made a pair
+        'stamped ahead of the clock'); the next pair of the new clock restarts the MPC."""
+        if self._last_tick_stamp is None or now_ns >= self._last_tick_stamp:
+            return False
+        limit = now_ns + self.state_timeout * NS_PER_S
+        for recent in (self._joints_recent, self._base_recent):
+            kept = [x for x in recent if x[0] <= limit]
+            recent.clear()
+            recent.extend(kept)
+        self._warn("clock_back", f"the clock went back {(self._last_tick_stamp - now_ns) / 1e9:.3f}"
+                   " s (a simulator reset?): states stamped before it dropped")
         return True
 
     def _misses_are_the_rule(self) -> bool:
