@@ -14,9 +14,12 @@ are written under a temporary name and renamed into place: concurrent processes 
 the same function, the last rename wins and every reader sees a complete file.
 
 A cached library that is damaged (empty, not a shared object, truncated: a disk filled up,
-a copy cut short) is rebuilt, never loaded (a truncated one killed the process with SIGBUS).
-Without a working compiler or a writable cache, ``fn`` is returned uncompiled (slower, same
-numbers) with one warning that says why. A compiler whose Python process dies (SIGTERM,
+a copy cut short; or bytes changed inside it, which its SHA-256, kept next to it in
+``<library>.sha256``, tells) is rebuilt, never loaded (a truncated one killed the process
+with SIGBUS, one overwritten inside with SIGILL or SIGSEGV, or returned other numbers).
+Without a working compiler (none, or one that fails: a bad ``$CC`` or
+``$HORIZON_MPC_CODEGEN_MARCH``) or a writable cache, ``fn`` is returned uncompiled (slower,
+same numbers) with one warning that says why. A compiler whose Python process dies (SIGTERM,
 SIGKILL) is killed with its whole process group, and build folders left by a killed process
 are removed by later builds.
 
@@ -66,6 +69,7 @@ __all__ = [
     "build_shared_library",
     "cache_info",
     "cache_max_bytes",
+    "checksum_path",
     "codegen_enabled",
     "compile_function",
     "compiled_library",
@@ -235,10 +239,8 @@ def compile_function(
 
     Returns:
         a ``casadi.Function`` backed by the shared library, or ``fn`` itself when
-        ``HORIZON_MPC_NO_CODEGEN=1``.
-
-    Raises:
-        RuntimeError: the C compiler failed (the message holds the end of its output).
+        ``HORIZON_MPC_NO_CODEGEN=1``, or with a warning (once per reason) when it cannot
+        be compiled: no compiler, one that fails, a cache folder that cannot be written.
     """
     if not codegen_enabled():
         return fn
@@ -261,7 +263,13 @@ def compile_function(
         else:
             _build(fn, lib)
     except OSError as exc:  # no compiler, a cache folder that cannot be written
-        _warn_uncompiled(f"{type(exc).__name__}: {exc}")
+        # by folder and reason: the path named a random build folder, and each of a
+        # model's functions warned again
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        _warn_uncompiled(f"{folder}: {reason}")
+        return fn
+    except RuntimeError as exc:  # a compiler that fails (a bad $CC or -march)
+        _warn_uncompiled(_compiler_error(exc))
         return fn
     try:
         compiled = cs.external(fn.name(), str(lib))
@@ -269,7 +277,11 @@ def compile_function(
         _log.warning("cached library %s does not load (%s): rebuilding it", lib,
                      str(exc).splitlines()[-1])
         lib.unlink(missing_ok=True)
-        _build(fn, lib)
+        try:
+            _build(fn, lib)
+        except (OSError, RuntimeError) as again:
+            _warn_uncompiled(_compiler_error(again))
+            return fn
         try:
             compiled = cs.external(fn.name(), str(lib))
         except RuntimeError as again:  # e.g. a cache folder mounted noexec
@@ -280,6 +292,14 @@ def compile_function(
 
 
 _UNCOMPILED_WARNED: set[str] = set()
+
+
+def _compiler_error(exc: Exception) -> str:
+    """The reason of a failed build, the same for every function (the warning is said once
+    per reason): the compiler's first error line, else the last line of its message."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    errors = [line for line in lines[1:] if "error" in line.lower()]
+    return f"the C compiler failed: {(errors or lines or [repr(exc)])[0 if errors else -1]}"
 
 
 def _warn_uncompiled(reason: str) -> None:
@@ -315,7 +335,35 @@ def library_damage(lib: Path) -> str | None:
                                         struct.unpack_from(order + "HH", head, 0x2E))
     if shoff + shentsize * shnum > size:
         return f"truncated ({size} bytes, its section table ends at {shoff + shentsize * shnum})"
-    return None
+    return _checksum_damage(lib)
+
+
+def checksum_path(lib: Path) -> Path:
+    """The file next to ``lib`` holding its SHA-256, written by :func:`build_shared_library`."""
+    return lib.with_name(lib.name + ".sha256")
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _checksum_damage(lib: Path) -> str | None:
+    """Whether ``lib``'s bytes are those it was built with: a library overwritten inside
+    (its headers intact) was loaded and crashed every later run (SIGILL, SIGSEGV), or
+    returned other numbers without a word."""
+    try:
+        want = checksum_path(lib).read_text().split()[0]
+    except (OSError, IndexError):
+        return "no checksum (built before checksums were kept, or its build was interrupted)"
+    try:
+        got = _sha256(lib)
+    except OSError as exc:
+        return f"unreadable: {exc}"
+    return None if got == want else "its bytes changed since it was built (checksum)"
 
 
 def compiled_library(fn: cs.Function) -> Path | None:
@@ -374,6 +422,11 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
         returncode, stderr = _run_compiler(cmd)
         if returncode != 0:
             raise RuntimeError(f"compiling {what} failed ({' '.join(cmd)}):\n{stderr[-2000:]}")
+        # the checksum first: a reader seeing a library sees its checksum or a newer one
+        # (two processes building at once: a mismatch, one rebuild; never a damaged load)
+        tmp_sum = work / checksum_path(lib).name
+        tmp_sum.write_text(_sha256(tmp_lib) + "\n")
+        os.replace(tmp_sum, checksum_path(lib))
         os.replace(tmp_lib, lib)  # atomic within one file system
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -477,6 +530,7 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
         with contextlib.suppress(FileNotFoundError):  # another process pruned it
             lib.unlink()
             deleted.append(lib)
+        checksum_path(lib).unlink(missing_ok=True)
         total -= size
     if deleted:
         _log.info("codegen cache %s: removed %d least recently used libraries (bound %.0f MB, "

@@ -31,6 +31,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--max-mb is the bound of `prune`; `{args.command}` takes none")
     if args.dir is not None and not os.path.isdir(args.dir):
         parser.error(f"--dir {args.dir}: no such folder")
+    default = codegen.default_cache_dir()
+    if args.dir is None and default.exists() and not default.is_dir():
+        parser.error(f"the cache {default} (HORIZON_MPC_CACHE_DIR, XDG_CACHE_HOME or ~/.cache) "
+                     "is not a folder: the functions run uncompiled")
     if args.max_mb is not None and not (0 < args.max_mb < math.inf):
         parser.error(f"--max-mb must be a number of MB > 0, got {args.max_mb:g} (`clear` "
                      "empties the cache; HORIZON_MPC_CACHE_MAX_MB=0 leaves it unbounded)")
@@ -49,7 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     when = (time.strftime("%Y-%m-%d %H:%M", time.localtime(info.oldest))
             if info.oldest is not None else "-")
     print(f"{info.folder}: {info.libraries} libraries, {info.bytes / 1e6:.1f} MB "
-          f"(least recently used {when})")
+          f"(least recently used {when})"
+          + ("" if info.folder.is_dir() else "; no such folder yet (made at the first build)"))
     if args.command == "prune" and bound is None:
         print("no bound (HORIZON_MPC_CACHE_MAX_MB=0): nothing to prune")
     elif args.command == "prune" and info.bytes > bound:

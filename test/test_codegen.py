@@ -119,7 +119,21 @@ def test_compiler_errors_are_reported(cache, monkeypatch):
     monkeypatch.setattr(codegen, "CC_ARGV", ("false",))  # a "compiler" that always fails
     x = cs.SX.sym("x")
     with pytest.raises(RuntimeError, match="compiling broken failed"):
-        codegen.compile_function(cs.Function("broken", [x], [x * 3]))
+        codegen.build_shared_library(cache / "broken.so", lambda _work: [], "broken")
+
+
+def test_a_compiler_that_fails_leaves_the_functions_uncompiled_with_one_warning(
+        cache, monkeypatch, caplog):
+    """A bad -march (or $CC) was a traceback out of the motion CLI; a missing compiler was
+    already this. One warning for all of a model's functions."""
+    monkeypatch.setenv("HORIZON_MPC_CODEGEN_MARCH", "bogus")
+    monkeypatch.setattr(codegen, "_UNCOMPILED_WARNED", set())
+    x = cs.SX.sym("x")
+    fns = [cs.Function(name, [x], [x * k]) for k, name in enumerate(("f_a", "f_b"), 2)]
+    with caplog.at_level("WARNING", logger="horizon_mpc.codegen"):
+        assert [codegen.compile_function(fn) for fn in fns] == fns
+    assert caplog.text.count("running them uncompiled") == 1
+    assert "the C compiler failed" in caplog.text and "bogus" in caplog.text
 
 
 _SCRIPT = textwrap.dedent(
@@ -222,18 +236,25 @@ def test_each_target_gets_its_own_library(cache, fresh_arch, monkeypatch):
         np.testing.assert_allclose(a.full(), b.full(), rtol=1e-14)
 
 
-@pytest.mark.parametrize("damage", ["empty", "truncated", "garbage"])
+@pytest.mark.parametrize("damage", ["empty", "truncated", "garbage", "overwritten",
+                                    "no_checksum"])
 def test_a_damaged_cached_library_is_rebuilt_not_loaded(cache, damage, caplog):
     """A zero-byte or garbage file was a CasADi assertion at every later run; a truncated
-    one killed the process (SIGBUS) when loaded."""
+    one killed the process (SIGBUS) when loaded; one overwritten inside, its headers
+    intact, was loaded: SIGILL or SIGSEGV at every later run, or other numbers."""
     fn = _small_function()
     codegen.compile_function(fn)
     lib = next(cache.glob(f"{fn.name()}_*.so"))
     data = lib.read_bytes()
     lib.unlink()  # a new file: this process still maps the old one (truncating it in place
     # would crash it at its next call)
-    lib.write_bytes({"empty": b"", "truncated": data[:len(data) // 2],
-                     "garbage": b"not a library" * 50}[damage])
+    middle = len(data) // 2
+    lib.write_bytes({"empty": b"", "truncated": data[:middle],
+                     "garbage": b"not a library" * 50,
+                     "overwritten": data[:middle] + b"\xff" * 64 + data[middle + 64:],
+                     "no_checksum": data}[damage])
+    if damage == "no_checksum":  # a cache of before checksums
+        codegen.checksum_path(lib).unlink()
     codegen.forget_loaded()
     compiled = codegen.STATS.compiled
     with caplog.at_level("WARNING", logger="horizon_mpc.codegen"):
@@ -415,3 +436,21 @@ def test_cache_command_line_says_what_it_spared_or_that_there_is_no_bound(cache)
     env["HORIZON_MPC_CACHE_MAX_MB"] = "0"
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120).stdout
     assert "removed 0 libraries" in out and "no bound" in out
+
+
+def test_cache_command_line_names_a_cache_path_that_is_no_folder(tmp_path, monkeypatch,
+                                                                 capsys):
+    """HORIZON_MPC_CACHE_DIR=/etc/passwd: 'info' said 0 libraries, exit 0 (--dir said
+    'no such folder')."""
+    from horizon_mpc import codegen_cli
+
+    (tmp_path / "file").write_text("")
+    monkeypatch.setenv("HORIZON_MPC_CACHE_DIR", str(tmp_path / "file"))
+    with pytest.raises(SystemExit) as stop:
+        codegen_cli.main(["info"])
+    assert stop.value.code == 2 and "is not a folder" in capsys.readouterr().err
+    monkeypatch.setenv("HORIZON_MPC_CACHE_DIR", str(tmp_path / "none"))
+    assert codegen_cli.main(["info"]) == 0
+    out = capsys.readouterr().out
+    assert "0 libraries" in out and "no such folder yet" in out
+    assert not (tmp_path / "none").exists()

@@ -161,6 +161,10 @@ def test_cli_rejects_bad_settings_before_solving_in_one_line(capsys):
         assert err.startswith("motion: error:") and text in err and "Traceback" not in err
         if setting.startswith("distnace"):  # named as the --set it came from, not the file's
             assert "motion: error: --set: unknown setting(s) ['distnace']" in err
+    # another motion's config: named as the motion run, the file's motion a hint
+    assert main(["walk", "--config", "leap", "--no-animation"]) == 2
+    err = capsys.readouterr().err
+    assert "for motion 'walk' (a config of the 'leap' motion?)" in err
 
 
 @pytest.mark.parametrize("motion, setting, text", [
@@ -196,6 +200,24 @@ def test_cli_refuses_an_out_path_that_is_a_file_before_solving(tmp_path, capsys)
     # a folder under a file: a traceback after the solve, exit 1, before
     assert main(["walk", "--out", str(tmp_path / "taken" / "sub"), "--no-animation"]) == 2
     assert "cannot make that folder" in capsys.readouterr().err
+
+
+def test_cli_refuses_an_out_folder_it_cannot_write_in_before_solving(tmp_path, capsys,
+                                                                     monkeypatch):
+    """An existing read-only folder passed, the solve ran (70-100 s for a turn), then the
+    write failed with a traceback and exit 1 (an auditor's read-only mount)."""
+    import errno
+
+    from horizon_mpc.motions import cli
+
+    def refused(*_args, **_kwargs):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(cli.tempfile, "TemporaryFile", refused)
+    monkeypatch.setattr("horizon_mpc.motions.wholebody.robot_model",
+                        lambda *a: pytest.fail("the model was built before the check"))
+    assert cli.main(["walk", "--out", str(tmp_path), "--no-animation"]) == 2
+    assert "cannot write in that folder (Read-only file system)" in capsys.readouterr().err
 
 
 @pytest.mark.slow

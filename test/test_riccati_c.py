@@ -8,6 +8,7 @@ both compiled kernels (AVX2+FMA where the CPU has it, and the baseline ISA).
 
 from __future__ import annotations
 
+import casadi as cs
 import numpy as np
 import pytest
 
@@ -304,6 +305,29 @@ def test_the_cached_library_is_loaded_not_rebuilt(compiled, monkeypatch):
     riccati_c._forget()
     assert riccati_c.available()
 
+
+
+def test_another_library_under_its_name_is_rebuilt_not_a_traceback(compiled, monkeypatch,
+                                                                   tmp_path, caplog):
+    """A valid shared object without the recursion's symbols (another library copied
+    over it, with a matching checksum) raised AttributeError out of every run."""
+    from horizon_mpc import codegen
+
+    x = cs.SX.sym("x")
+    other = codegen.compile_function(cs.Function("not_riccati", [x], [2 * x]),
+                                     cache_dir=tmp_path)
+    lib = tmp_path / "riccati_copy.so"
+    lib.write_bytes(codegen.compiled_library(other).read_bytes())
+    codegen.checksum_path(lib).write_text(codegen._sha256(lib) + "\n")
+    built: list = []
+    monkeypatch.setattr(riccati_c, "library_path", lambda: lib)
+    monkeypatch.setattr(riccati_c, "_build", lambda path: (built.append(path), path.write_bytes(
+        compiled.read_bytes())))
+    riccati_c._forget()
+    with caplog.at_level("WARNING", logger=riccati_c.__name__):
+        assert riccati_c.available()
+    assert built == [lib] and "undefined symbol" in caplog.text
+    riccati_c._forget()
 
 def test_unavailable_with_no_codegen_says_why(compiled, monkeypatch, caplog):
     monkeypatch.setenv("HORIZON_MPC_NO_CODEGEN", "1")

@@ -14,6 +14,7 @@ import argparse
 import dataclasses
 import logging
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -84,7 +85,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         solver = args.solver or mc.solver
         cfg = load_robot_config(robot)
         settings = mc.settings_for(cls, cfg.name, _overrides(args.set))
-        model = robot_model(cfg, getattr(settings, "locked_joints", ()))
         out = Path(args.out or f"out/motions/{args.motion}")
         if out.exists() and not out.is_dir():  # found before the solve, not after it
             raise ValueError(f"--out {out} exists and is not a folder")
@@ -92,6 +92,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:  # under a file, no permission: a traceback after the solve
             raise ValueError(f"--out {out}: cannot make that folder ({exc.strerror})") from None
+        try:  # an existing folder that cannot be written: found after the solve too
+            tempfile.TemporaryFile(dir=out).close()
+        except OSError as exc:
+            raise ValueError(f"--out {out}: cannot write in that folder ({exc.strerror})") \
+                from None
+        model = robot_model(cfg, getattr(settings, "locked_joints", ()))
     except (ValueError, KeyError, FileNotFoundError, yaml.YAMLError) as exc:
         print(f"motion: error: {exc}", file=sys.stderr)
         return 2

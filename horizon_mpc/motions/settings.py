@@ -54,8 +54,12 @@ class MotionConfig:
         if unknown:
             given = sorted(set(unknown) & set(overrides or {}))  # --set, not the file's
             where = "--set" if given else (self.source or self.motion)
+            # the motion run is the settings class's (`walk --config leap`: the walk)
+            motion = cls.__name__.removesuffix("Settings").lower()
+            hint = ("" if given or self.motion == motion else
+                    f" (a config of the {self.motion!r} motion?)")
             raise ValueError(f"{where}: unknown setting(s) {given or unknown} for motion "
-                             f"{self.motion!r}; known: {sorted(fields)}")
+                             f"{motion!r}{hint}; known: {sorted(fields)}")
         return cls(**{k: _checked_value(k, v, field_default(fields[k])) for k, v in values.items()})
 
 

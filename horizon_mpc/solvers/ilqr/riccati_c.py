@@ -25,6 +25,7 @@ they are read through their strides, without a copy.
 
 from __future__ import annotations
 
+import _ctypes
 import ctypes
 import hashlib
 import logging
@@ -125,16 +126,33 @@ def _load() -> ctypes.CDLL:
                 _build(lib)
             codegen.mark_used(lib)
             try:
-                _lib = _bind(ctypes.CDLL(str(lib)))
-            except OSError as err:  # a damaged cache entry: build it again, once
+                _lib = _open(lib)
+            except (OSError, AttributeError) as err:  # a damaged cache entry (another
+                # library under its name: a missing symbol): build it again, once
                 _log.warning("could not load %s (%s); rebuilding it", lib, err)
                 _build(lib)
-                _lib = _bind(ctypes.CDLL(str(lib)))
+                _lib = _open(lib)
             return _lib
-        except (OSError, RuntimeError) as err:
+        except (OSError, RuntimeError, AttributeError) as err:
             _failure = str(err)
             _report(_failure, logging.WARNING)
     raise RuntimeError(f"compiled Riccati recursion unavailable: {_failure}")
+
+
+def _open(path: Path) -> ctypes.CDLL:
+    """The library at ``path``, its functions typed. A library without them (another one
+    under its name) is closed again, so that a rebuilt one at the same path gets loaded
+    (dlopen would hand back the open one).
+
+    Raises:
+        OSError: it does not load. AttributeError: a function is missing.
+    """
+    lib = ctypes.CDLL(str(path))
+    try:
+        return _bind(lib)
+    except AttributeError:
+        _ctypes.dlclose(lib._handle)
+        raise
 
 
 def _bind(lib: ctypes.CDLL) -> ctypes.CDLL:
