@@ -117,7 +117,6 @@ def test_default_cache_dir_follows_xdg(monkeypatch, tmp_path):
 
 def test_compiler_errors_are_reported(cache, monkeypatch):
     monkeypatch.setattr(codegen, "CC_ARGV", ("false",))  # a "compiler" that always fails
-    x = cs.SX.sym("x")
     with pytest.raises(RuntimeError, match="compiling broken failed"):
         codegen.build_shared_library(cache / "broken.so", lambda _work: [], "broken")
 
