@@ -79,6 +79,7 @@ __all__ = [
     "library_damage",
     "mark_used",
     "prune_cache",
+    "report_damage",
 ]
 
 _log = logging.getLogger(__name__)
@@ -254,7 +255,7 @@ def compile_function(
         folder.mkdir(parents=True, exist_ok=True)
         damage = library_damage(lib) if lib.is_file() else None
         if damage:
-            _log.warning("cached library %s is damaged (%s): rebuilding it", lib, damage)
+            report_damage(_log, lib, damage)
             lib.unlink(missing_ok=True)
         if lib.is_file():
             _log.debug("loading %s from the cache (%s)", fn.name(), lib)
@@ -338,6 +339,17 @@ def library_damage(lib: Path) -> str | None:
     return _checksum_damage(lib)
 
 
+NO_CHECKSUM = "no checksum (built before checksums were kept, or its build was interrupted)"
+
+
+def report_damage(logger: logging.Logger, lib: Path, damage: str) -> None:
+    """Log that ``lib`` is rebuilt because of ``damage`` (:func:`library_damage`): a
+    warning, but an info for a library of a cache from before checksums (each of them is
+    rebuilt once: a warning each was noise)."""
+    level = logging.INFO if damage == NO_CHECKSUM else logging.WARNING
+    logger.log(level, "cached library %s is damaged (%s): rebuilding it", lib, damage)
+
+
 def checksum_path(lib: Path) -> Path:
     """The file next to ``lib`` holding its SHA-256, written by :func:`build_shared_library`."""
     return lib.with_name(lib.name + ".sha256")
@@ -358,7 +370,7 @@ def _checksum_damage(lib: Path) -> str | None:
     try:
         want = checksum_path(lib).read_text().split()[0]
     except (OSError, IndexError):
-        return "no checksum (built before checksums were kept, or its build was interrupted)"
+        return NO_CHECKSUM
     try:
         got = _sha256(lib)
     except OSError as exc:

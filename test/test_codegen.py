@@ -256,9 +256,12 @@ def test_a_damaged_cached_library_is_rebuilt_not_loaded(cache, damage, caplog):
         codegen.checksum_path(lib).unlink()
     codegen.forget_loaded()
     compiled = codegen.STATS.compiled
-    with caplog.at_level("WARNING", logger="horizon_mpc.codegen"):
+    with caplog.at_level("INFO", logger="horizon_mpc.codegen"):
         again = codegen.compile_function(fn)
     assert codegen.STATS.compiled == compiled + 1 and "is damaged" in caplog.text
+    # an old cache's libraries are rebuilt with a note each, not a warning
+    levels = {r.levelname for r in caplog.records if "is damaged" in r.getMessage()}
+    assert levels == ({"INFO"} if damage == "no_checksum" else {"WARNING"})
     x = np.linspace(0.1, 0.9, fn.size1_in(0))
     for got, want in zip(again(x, 2.0), fn(x, 2.0), strict=True):
         np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-12)
