@@ -63,6 +63,7 @@ __all__ = [
     "CC_ARGV",
     "CacheInfo",
     "CompileStats",
+    "CompilerError",
     "DEFAULT_CACHE_MAX_MB",
     "PRUNE_SPARE_S",
     "arch_flags",
@@ -79,7 +80,6 @@ __all__ = [
     "library_damage",
     "mark_used",
     "prune_cache",
-    "report_damage",
 ]
 
 _log = logging.getLogger(__name__)
@@ -255,7 +255,7 @@ def compile_function(
         folder.mkdir(parents=True, exist_ok=True)
         damage = library_damage(lib) if lib.is_file() else None
         if damage:
-            report_damage(_log, lib, damage)
+            _log.warning("cached library %s is damaged (%s): rebuilding it", lib, damage)
             lib.unlink(missing_ok=True)
         if lib.is_file():
             _log.debug("loading %s from the cache (%s)", fn.name(), lib)
@@ -269,7 +269,7 @@ def compile_function(
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         _warn_uncompiled(f"{folder}: {reason}")
         return fn
-    except RuntimeError as exc:  # a compiler that fails (a bad $CC or -march)
+    except CompilerError as exc:  # a compiler that fails (a bad $CC or -march)
         _warn_uncompiled(_compiler_error(exc))
         return fn
     try:
@@ -280,7 +280,7 @@ def compile_function(
         lib.unlink(missing_ok=True)
         try:
             _build(fn, lib)
-        except (OSError, RuntimeError) as again:
+        except (OSError, CompilerError) as again:
             _warn_uncompiled(_compiler_error(again))
             return fn
         try:
@@ -293,6 +293,10 @@ def compile_function(
 
 
 _UNCOMPILED_WARNED: set[str] = set()
+
+
+class CompilerError(RuntimeError):
+    """The C compiler ran and failed (:func:`build_shared_library`)."""
 
 
 def _compiler_error(exc: Exception) -> str:
@@ -339,17 +343,6 @@ def library_damage(lib: Path) -> str | None:
     return _checksum_damage(lib)
 
 
-NO_CHECKSUM = "no checksum (built before checksums were kept, or its build was interrupted)"
-
-
-def report_damage(logger: logging.Logger, lib: Path, damage: str) -> None:
-    """Log that ``lib`` is rebuilt because of ``damage`` (:func:`library_damage`): a
-    warning, but an info for a library of a cache from before checksums (each of them is
-    rebuilt once: a warning each was noise)."""
-    level = logging.INFO if damage == NO_CHECKSUM else logging.WARNING
-    logger.log(level, "cached library %s is damaged (%s): rebuilding it", lib, damage)
-
-
 def checksum_path(lib: Path) -> Path:
     """The file next to ``lib`` holding its SHA-256, written by :func:`build_shared_library`."""
     return lib.with_name(lib.name + ".sha256")
@@ -366,16 +359,33 @@ def _sha256(path: Path) -> str:
 def _checksum_damage(lib: Path) -> str | None:
     """Whether ``lib``'s bytes are those it was built with: a library overwritten inside
     (its headers intact) was loaded and crashed every later run (SIGILL, SIGSEGV), or
-    returned other numbers without a word."""
-    try:
-        want = checksum_path(lib).read_text().split()[0]
-    except (OSError, IndexError):
-        return NO_CHECKSUM
+    returned other numbers without a word. A library without a checksum (a cache of an
+    earlier version, sound by the checks above) is adopted: its checksum is written now
+    when the folder can be written (rebuilding every one cost minutes, and a read-only
+    cache ran uncompiled)."""
+    path = checksum_path(lib)
     try:
         got = _sha256(lib)
     except OSError as exc:
         return f"unreadable: {exc}"
+    try:
+        want = path.read_text().split()[0]
+    except FileNotFoundError:
+        with contextlib.suppress(OSError):
+            _write_atomically(path, got + "\n")
+        return None
+    except (OSError, IndexError):
+        return "its checksum file is unreadable or empty"
     return None if got == want else "its bytes changed since it was built (checksum)"
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def compiled_library(fn: cs.Function) -> Path | None:
@@ -421,7 +431,7 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
 
     Raises:
         FileNotFoundError: no C compiler (checked before ``compiler_args`` runs).
-        RuntimeError: the compiler failed (the message ends with its output).
+        CompilerError: the compiler failed (the message ends with its output).
     """
     if shutil.which(CC_ARGV[0]) is None:
         raise FileNotFoundError(f"C compiler {CC_ARGV[0]!r} not found on PATH")
@@ -433,7 +443,7 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
         cmd = [*CC_ARGV, *compiler_args(work), "-o", str(tmp_lib), "-lm"]
         returncode, stderr = _run_compiler(cmd)
         if returncode != 0:
-            raise RuntimeError(f"compiling {what} failed ({' '.join(cmd)}):\n{stderr[-2000:]}")
+            raise CompilerError(f"compiling {what} failed ({' '.join(cmd)}):\n{stderr[-2000:]}")
         # the checksum first: a reader seeing a library sees its checksum or a newer one
         # (two processes building at once: a mismatch, one rebuild; never a damaged load)
         tmp_sum = work / checksum_path(lib).name
@@ -544,6 +554,10 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
             deleted.append(lib)
         checksum_path(lib).unlink(missing_ok=True)
         total -= size
+    if max_bytes == 0:  # clear: checksums whose library is gone too
+        for orphan in folder.glob("*.so.sha256"):
+            if not orphan.with_suffix("").exists():
+                orphan.unlink(missing_ok=True)
     if deleted:
         _log.info("codegen cache %s: removed %d least recently used libraries (bound %.0f MB, "
                   "HORIZON_MPC_CACHE_MAX_MB)", folder, len(deleted), max_bytes / 1e6)

@@ -393,7 +393,11 @@ def test_creation_bounds_may_give_one_column_per_active_node(prb):
     x, u = prb.get_variable("x"), prb.get_variable("u")
     c = prb.create_constraint("some", x, nodes=[5, 2],
                               bounds=(np.array([[0, 1], [2, 3]]), np.full((2, 2), 9.0)))
-    np.testing.assert_array_equal(c.lower_bounds[:, [2, 5]], [[0, 1], [2, 3]])  # sorted nodes
+    # in the order listed, as set_bounds(lb, ub, nodes=[5, 2]) puts them
+    np.testing.assert_array_equal(c.lower_bounds[:, [5, 2]], [[0, 1], [2, 3]])
+    same = prb.create_constraint("same", x, nodes=[5, 2])
+    same.set_bounds(np.array([[0, 1], [2, 3]]), 9.0, nodes=[5, 2])
+    np.testing.assert_array_equal(same.lower_bounds, c.lower_bounds)
     np.testing.assert_array_equal(c.upper_bounds[:, [2, 5]], 9.0)
     e = prb.create_constraint("inputs", u, bounds=(-np.ones((1, 10)), np.ones((1, 10))))
     np.testing.assert_array_equal(e.lower_bounds[0, :10], -1.0)

@@ -124,8 +124,11 @@ class Constraint(Term):
 
     kind = "constraint"
 
-    def __init__(self, *args, bounds=None, **kwargs):
-        super().__init__(*args, **kwargs)
+    def __init__(self, name: str, expr: cs.SX, function: cs.Function, uses_input: bool,
+                 offsets: list[int], valid_nodes: np.ndarray, n_nodes: int,
+                 nodes: NodeSelection, bounds=None):
+        super().__init__(name, expr, function, uses_input, offsets, valid_nodes, n_nodes,
+                         nodes)
         self._lb = np.zeros((self.dim, self.n_nodes + 1))
         self._ub = np.zeros((self.dim, self.n_nodes + 1))
         self.bounds_revision = self.revision  # changes with the bounds only
@@ -133,8 +136,8 @@ class Constraint(Term):
             if not (isinstance(bounds, (tuple, list)) and len(bounds) == 2):
                 raise TypeError(f"constraint {self.name!r}: bounds must be a pair (lb, ub), "
                                 f"got {bounds!r}")
-            # per-node bounds: (dim, N+1), or one column per active node (as set_bounds
-            # takes them with those nodes)
+            # per-node bounds: (dim, N+1), or one column per active node, in the order the
+            # nodes were given (as set_bounds takes them with those nodes)
             cols = {np.shape(b)[1] for b in bounds if np.ndim(b) == 2} - {1}
             per_active = bool(cols - {self.n_nodes + 1})
             if per_active and cols != {self.nodes.size}:
@@ -142,7 +145,8 @@ class Constraint(Term):
                                  f"{sorted(cols)} columns; give one per node 0..N "
                                  f"({self.n_nodes + 1}) or one per active node "
                                  f"({self.nodes.size})")
-            self.set_bounds(*bounds, nodes=self.nodes if per_active else None)
+            chosen = self.nodes if nodes is None else nodes
+            self.set_bounds(*bounds, nodes=chosen if per_active else None)
 
     def set_bounds(self, lb: Values, ub: Values, nodes: NodeSelection = None) -> None:
         """Set the bounds on ``nodes`` (None: all nodes); scalar, (dim,) or (dim, n_sel)."""

@@ -120,7 +120,7 @@ def _load() -> ctypes.CDLL:
             lib = library_path()
             damage = codegen.library_damage(lib) if lib.is_file() else None
             if damage:  # loading a truncated library is a SIGBUS, not an OSError
-                codegen.report_damage(_log, lib, damage)
+                _log.warning("cached library %s is damaged (%s): rebuilding it", lib, damage)
                 lib.unlink(missing_ok=True)
             if not lib.is_file():
                 _build(lib)
