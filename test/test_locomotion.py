@@ -168,7 +168,10 @@ def test_a_gait_change_while_walking_ramps_the_command_down_and_drops_the_pose_l
         next(ticks)
     assert mpc.scheduler.walking and mpc.cmd[0] == pytest.approx(0.3)
     mpc.pose_ref[0] += 0.3  # a lag as a walk leaves it
+    lagging = mpc.pose_ref.copy()
     try:
+        mpc.set_gait("trot")  # the gait it walks (a ros2 param set of the same value)
+        np.testing.assert_array_equal(mpc.pose_ref, lagging)
         mpc.set_gait("walk")
         assert mpc.pose_ref[:2] == pytest.approx(mpc._pose_expected[:2])
         cmds = []
@@ -181,7 +184,8 @@ def test_a_gait_change_while_walking_ramps_the_command_down_and_drops_the_pose_l
                                       for k in range(1, len(cmds) + 1)])
         next(ticks)
         assert mpc.scheduler.gait.name == "walk" and mpc.cmd[0] > cmds[-1]
-    finally:
+    finally:  # the module's MPC: standing, trot, for the tests after this one
+        mpc.scheduler.reset(0.0)
         mpc.set_gait("trot", duty_factor=None)
 
 def _contact_masks(contacts):

@@ -207,17 +207,26 @@ def test_cli_refuses_an_out_folder_it_cannot_write_in_before_solving(tmp_path, c
     """An existing read-only folder passed, the solve ran (70-100 s for a turn), then the
     write failed with a traceback and exit 1 (an auditor's read-only mount)."""
     import errno
+    import types
 
     from horizon_mpc.motions import cli
 
     def refused(*_args, **_kwargs):
         raise OSError(errno.EROFS, "Read-only file system")
 
-    monkeypatch.setattr(cli.tempfile, "TemporaryFile", refused)
-    monkeypatch.setattr("horizon_mpc.motions.wholebody.robot_model",
-                        lambda *a: pytest.fail("the model was built before the check"))
+    monkeypatch.setattr(cli, "tempfile", types.SimpleNamespace(TemporaryFile=refused))
+    monkeypatch.setattr("horizon_mpc.motions.walk.run_walk",
+                        lambda *a, **k: pytest.fail("solved before the check"))
     assert cli.main(["walk", "--out", str(tmp_path), "--no-animation"]) == 2
     assert "cannot write in that folder (Read-only file system)" in capsys.readouterr().err
+
+
+def test_cli_leaves_no_out_folder_behind_for_a_bad_locked_joint(tmp_path, capsys):
+    from horizon_mpc.motions.cli import main
+
+    out = tmp_path / "new"
+    assert main(["turn", "--set", "locked_joints=[foo]", "--out", str(out)]) == 2
+    assert "foo" in capsys.readouterr().err and not out.exists()
 
 
 @pytest.mark.slow

@@ -393,7 +393,14 @@ def test_a_simulator_reset_is_not_blamed_on_clocks_that_differ(context, walking_
         assert node._base is None and node._joints[0] == new
         node._on_odom(odometry_to_msg(time_from_ns(new), q[:3], q[3:7], zeros, zeros))
         assert node.tick() and node._last_tick_stamp == new
-        assert node.stale_skips == 0
+        assert node.stale_skips == 1  # counted, WARN diagnostics
+        # states ahead of a clock that did not go back: a clock mismatch, as before
+        ahead = new + NS_PER_S
+        node._on_joint_state(joint_state_to_msg(time_from_ns(ahead), node.joint_names,
+                                                q[7:], np.zeros(len(q) - 7)))
+        node._on_odom(odometry_to_msg(time_from_ns(ahead), q[:3], q[3:7], zeros, zeros))
+        assert not node.tick()
+        assert said[-1][0] == "future" and "use_sim_time" in said[-1][1]
     finally:
         node.destroy_node()
 
@@ -1144,6 +1151,8 @@ def test_separate_drivers_states_get_the_prepared_feedback_steps(context, walkin
         misses = node.mpc.prepare_misses
         for _ in range(5):
             prepared = node._prepared_ns
+            joints(prepared - 10 * ms)  # stamps that meet now and then, far from it
+            base(prepared - 10 * ms)
             joints(prepared - ms)
             base(prepared - 3 * ms // 2)
             base(prepared + 5 * ms // 2)
@@ -1609,6 +1618,9 @@ def test_params_file_sections_that_match_no_node_are_named(tmp_path):
         notes = unmatched_params_file_sections(argv, node)
         assert len(notes) == 1 and "section(s) ['r1/sim'] match no node" in notes[0]
     assert "['mpc', 'sim']" in unmatched_params_file_sections(argv, "/r1/sim")[0]
+    # the node's own default name is no sibling: mpc renamed mpc_left hears of 'mpc:'
+    notes = unmatched_params_file_sections(argv, "/mpc_left", default_name="mpc")
+    assert "section(s) ['mpc', 'r1/sim']" in notes[0]
 
 
 def test_node_targeted_parameter_rules_that_match_no_node_are_named():

@@ -385,7 +385,7 @@ def test_term_name_makes_frame_names_valid():
 
     assert term_name("leg-1.foot", "velocity") == "leg_1_foot_velocity"
     assert term_name("LF_FOOT", "no_force") == "LF_FOOT_no_force"
-    assert term_name("1_foot__x", "touchdown") == "t_1_foot_x_touchdown"
+    assert term_name("1_foot__x", "touchdown") == "f_1_foot_x_touchdown"
     assert all(cs.Function.check_name(term_name(f, "c")) for f in ("_a", "b__", "é", "a b"))
 
 

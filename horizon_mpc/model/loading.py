@@ -43,14 +43,15 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
     root = (pin.JointModelFreeFlyer(),) if floating_base else ()
     build = ((lambda: pin.buildModelFromXML(urdf, *root)) if is_xml
              else (lambda: pin.buildModelFromUrdf(str(path), *root)))
+    model = None
     with _stderr_captured() as said:
         try:
             model = build()
         except (ValueError, RuntimeError) as exc:
             error = exc
-        else:
-            _check_root(model, floating_base, source)
-            return model
+    if model is not None:
+        _check_root(model, floating_base, source)
+        return model
     # urdfdom prints the reason (a joint without limits, an unknown link) on stderr and
     # raises "does not contain a valid URDF model" only
     reason = "; ".join(line.strip().removeprefix("Error:").strip() for line in said

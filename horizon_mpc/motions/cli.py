@@ -88,6 +88,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         out = Path(args.out or f"out/motions/{args.motion}")
         if out.exists() and not out.is_dir():  # found before the solve, not after it
             raise ValueError(f"--out {out} exists and is not a folder")
+        # before the folder is made: a bad locked_joints left an empty one
+        model = robot_model(cfg, getattr(settings, "locked_joints", ()))
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:  # under a file, no permission: a traceback after the solve
@@ -97,7 +99,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         except OSError as exc:
             raise ValueError(f"--out {out}: cannot write in that folder ({exc.strerror})") \
                 from None
-        model = robot_model(cfg, getattr(settings, "locked_joints", ()))
     except (ValueError, KeyError, FileNotFoundError, yaml.YAMLError) as exc:
         print(f"motion: error: {exc}", file=sys.stderr)
         return 2

@@ -581,14 +581,18 @@ class WalkingMpc:
         step_duration = g.step_duration if step_duration is None else float(step_duration)
         step_height = g.step_height if step_height is None else float(step_height)
         gait = make_gait(name, step_duration, step_height, duty_factor, len(self.wp.feet))
+        old = self.scheduler.pending or self.scheduler.gait
+        changed = (gait.name, gait.period, gait.duty_factor) != (old.name, old.period,
+                                                                 old.duty_factor)
         g.name, g.step_duration, g.step_height = name, step_duration, step_height
         g.duty_factor = None if duty_factor is None else float(duty_factor)
-        self.scheduler.set_gait(gait, self.t_last if self.t_last is not None else 0.0)
-        if self.t_last is not None:
+        if changed and self.scheduler.walking:
             # the pose reference's lag belongs to the old gait: the walk tracks ~75 % of its
             # command, so its lag grew to pose_leash, and the trot's higher limits released
-            # it at once (go2 lunged to 0.8 m/s for a 0.3 command, fell in real time)
+            # it at once (go2 lunged to 0.8 m/s for a 0.3 command, fell in real time). A
+            # standing robot keeps its reference (a pushed one walks back to it)
             self.pose_ref = np.array(self._pose_expected)
+        self.scheduler.set_gait(gait, self.t_last if self.t_last is not None else 0.0)
 
     def set_stand_when_idle(self, stand: bool) -> None:
         """With a zero command, keep the feet down (True) or keep the gait stepping in place

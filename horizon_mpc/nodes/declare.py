@@ -36,8 +36,8 @@ def declare(node: Node, name: str, default: object, description: str,
 
     A float parameter given an integer at start-up (``-p control_rate:=50``, a YAML ``50``)
     takes it as that float, and a float-list parameter an integer list (``[1, 2, 3]``): rcl
-    types them as integers, and the declaration would otherwise fail on the type. (Live
-    ``ros2 param set`` keeps rclpy's strict typing.)
+    types them as integers, and the declaration would otherwise fail on the type (in a live
+    set: :func:`accept_integers_for_floats`).
     """
     desc = ParameterDescriptor(description=description, read_only=read_only)
     if rng:
@@ -52,22 +52,15 @@ def declare(node: Node, name: str, default: object, description: str,
         wanted = (f"it takes a {default.name.lower().replace('_', ' ')}"
                   if isinstance(default, Parameter.Type) else f"its default is {default!r}")
         raise ValueError(f"parameter {name!r} was given no value (an empty list?); {wanted}")
-    if (isinstance(default, float) and given is not None
-            and given.type_ == Parameter.Type.INTEGER):
-        overrides[name] = Parameter(name, value=float(given.value))
-    elif (isinstance(default, list) and default and isinstance(default[0], float)
-          and given is not None and given.type_ == Parameter.Type.INTEGER_ARRAY):
-        # a weight list written without dots (-p "w_base_linear_velocity:=[1,2,3]")
-        overrides[name] = Parameter(name, value=[float(x) for x in given.value])
+    if given is not None and not isinstance(default, Parameter.Type):
+        # a weight list written without dots too (-p "w_base_linear_velocity:=[1,2,3]")
+        overrides[name] = _as_float(given, Parameter.Type.from_parameter_value(default))
     node.declare_parameter(name, default, desc)
 
 
-def _as_float(node: Node, param: Parameter) -> Parameter:
-    """``param`` as the float (list) its declared parameter holds, when it is an integer
-    (list); else unchanged."""
-    if not node.has_parameter(param.name):
-        return param  # rclpy refuses it as undeclared, with its own reason
-    declared = node.get_parameter(param.name).type_
+def _as_float(param: Parameter, declared: Parameter.Type) -> Parameter:
+    """``param`` as a float (list) when it is an integer (list) and ``declared`` is a float
+    (list) type; else unchanged."""
     if param.type_ == Parameter.Type.INTEGER and declared == Parameter.Type.DOUBLE:
         return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
     if (param.type_ == Parameter.Type.INTEGER_ARRAY
@@ -80,6 +73,8 @@ def _as_float(node: Node, param: Parameter) -> Parameter:
 def accept_integers_for_floats(node: Node) -> None:
     """Let a live set give an integer to a float parameter and an integer list to a
     float-list one (``ros2 param set /mpc max_vx 1``: the CLI types ``1`` as an integer,
-    which rclpy refuses on a float parameter); other types still fail on the type."""
+    which rclpy refuses on a float parameter); other types still fail on the type, and an
+    undeclared name gets rclpy's own refusal."""
     node.add_pre_set_parameters_callback(
-        lambda params: [_as_float(node, p) for p in params])
+        lambda params: [_as_float(p, node.get_parameter(p.name).type_)
+                        if node.has_parameter(p.name) else p for p in params])

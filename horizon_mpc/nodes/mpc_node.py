@@ -87,9 +87,11 @@ class MpcNode(MpcParameters, Node):
     ``robot``/``config`` parameter. Otherwise the node builds one (seconds, logged).
     """
 
+    DEFAULT_NAME = "mpc"  # spin.PACKAGE_NODES
+
     def __init__(
         self,
-        node_name: str = "mpc",
+        node_name: str = DEFAULT_NAME,
         *,
         parameter_overrides: Sequence[Parameter] | None = None,
         mpc: WalkingMpc | None = None,
@@ -148,6 +150,8 @@ class MpcNode(MpcParameters, Node):
         self._cmd_timed_out = True
         self._cmd_rejected = 0  # cmd_vel messages rejected since the last valid one
         self._last_tick_stamp: int | None = None
+        self._clock_seen_ns: int | None = None  # the node clock at the last tick
+        self._clock_back = False  # it went back since (until states of before are dropped)
         self.plan: Plan | None = None
         self.ticks = 0
         self.deadline_misses = 0
@@ -486,13 +490,14 @@ class MpcNode(MpcParameters, Node):
         if prepared is not None and self._joints_recent and self._base_recent:
             st = self.mpc.settings
             window = max(st.max_extrapolation, st.feedback_tolerance) * NS_PER_S
-            if pairs:
-                nearest = min(pairs, key=lambda pair: abs(pair[0][0] - prepared))
-            else:  # until session 25 nearly every tick of separate drivers ran whole
-                nearest = tuple(min(recent, key=lambda x: abs(x[0] - prepared))
-                                for recent in (self._joints_recent, self._base_recent))
-            if max(abs(x[0] - prepared) for x in nearest) <= window:
-                return nearest
+            # the nearest pair, else the nearest of each stream (separate drivers, whose
+            # stamps meet now and then or never: until session 25 their newest of each)
+            options = [min(pairs, key=lambda pair: abs(pair[0][0] - prepared))] if pairs else []
+            options.append(tuple(min(recent, key=lambda x: abs(x[0] - prepared))
+                                 for recent in (self._joints_recent, self._base_recent)))
+            for nearest in options:
+                if max(abs(x[0] - prepared) for x in nearest) <= window:
+                    return nearest
         if pairs:
             return pairs[-1]
         return self._joints, self._base
@@ -512,6 +517,9 @@ class MpcNode(MpcParameters, Node):
         joints, base = self._state_pair()
         stamp_ns = min(joints[0], base[0])
         now_ns = self.get_clock().now().nanoseconds
+        if self._clock_seen_ns is not None and now_ns < self._clock_seen_ns:
+            self._clock_back = True
+        self._clock_seen_ns = now_ns
         if stamp_ns == self._last_tick_stamp:
             # no new state since the last plan: nothing to do, unless the states stopped
             # (a timer tick): then say so, as for a stale state that arrives
@@ -541,8 +549,8 @@ class MpcNode(MpcParameters, Node):
         # planned from without a word
         ahead_ns, stream = max((joints[0], "joint_states"), (base[0], "odom"))
         ahead = (ahead_ns - now_ns) / NS_PER_S
-        if ahead > self.state_timeout and self._clock_went_back(now_ns):
-            return False
+        if ahead > self.state_timeout and self._clock_back:
+            return self._after_clock_went_back(now_ns, stamp_ns)
         if ahead > self.state_timeout:
             return self._skip_stale(-ahead, "future", f"{stream} is stamped {ahead:.3f} s "
                                     "ahead of the node's clock (more than state_timeout "
@@ -555,6 +563,7 @@ class MpcNode(MpcParameters, Node):
         v = np.concatenate((lin, ang, vj))
         cmd = self.current_command()
         previous_ns, self._last_tick_stamp = self._last_tick_stamp, stamp_ns
+        self._clock_back = False  # planning from states of the clock as it is
         bootstrap = self.plan is None
         prepared = False  # a preparation awaited this tick
         wall = time.perf_counter()
@@ -613,21 +622,22 @@ class MpcNode(MpcParameters, Node):
         self._publish_diagnostics(plan, plan_ns, now_ns)
         return True
 
-    def _clock_went_back(self, now_ns: int) -> bool:
-        """Whether the node's clock is behind the last plan's state (a simulator reset): the
-        states received before it are then dropped, with a note, rather than blamed on
-        clocks that differ (one stream's new state and the other's old one made a pair
-        'stamped ahead of the clock'); the next pair of the new clock restarts the MPC."""
-        if self._last_tick_stamp is None or now_ns >= self._last_tick_stamp:
-            return False
+    def _after_clock_went_back(self, now_ns: int, stamp_ns: int) -> bool:
+        """The node's clock went back since the last tick (a simulator reset) and the states
+        are far ahead of it: they came before the reset, and are dropped with a note rather
+        than blamed on clocks that differ (one stream's new state and the other's old one
+        made a pair 'stamped ahead of the clock'); the next pair of the new clock restarts
+        the MPC. Counted as a stale skip (WARN diagnostics). Returns False."""
+        self._clock_back = False
         limit = now_ns + self.state_timeout * NS_PER_S
         for recent in (self._joints_recent, self._base_recent):
             kept = [x for x in recent if x[0] <= limit]
             recent.clear()
             recent.extend(kept)
-        self._warn("clock_back", f"the clock went back {(self._last_tick_stamp - now_ns) / 1e9:.3f}"
-                   " s (a simulator reset?): states stamped before it dropped")
-        return True
+        gone = (self._last_tick_stamp or stamp_ns) - now_ns
+        return self._skip_stale((now_ns - stamp_ns) / NS_PER_S, "clock_back",
+                                f"the clock went back {gone / 1e9:.3f} s (a simulator reset?): "
+                                "states stamped before it dropped", stamp_ns, now_ns)
 
     def _misses_are_the_rule(self) -> bool:
         """More than MISS_WARN_SHARE of the recent ticks were prepare misses."""

@@ -137,9 +137,11 @@ SIM_PARAMETERS = [
 class SimNode(Node):
     """The simulator node. Construct after ``rclpy.init()``; spin it with any executor."""
 
+    DEFAULT_NAME = "sim"  # spin.PACKAGE_NODES
+
     def __init__(
         self,
-        node_name: str = "sim",
+        node_name: str = DEFAULT_NAME,
         *,
         parameter_overrides: Sequence[Parameter] | None = None,
         **kwargs: object,

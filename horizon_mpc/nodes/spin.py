@@ -109,7 +109,8 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
         if stop.is_set():  # a signal while the node was being built
             return 0
         fqn = node.get_fully_qualified_name()
-        for note in (*unmatched_params_file_sections(argv, fqn),
+        for note in (*unmatched_params_file_sections(argv, fqn,
+                                                     getattr(node, "DEFAULT_NAME", None)),
                      *unmatched_parameter_rules(argv, fqn)):
             log.warning(note)
         unknown = undeclared_overrides(node)
@@ -137,13 +138,15 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
 PACKAGE_NODES = ("mpc", "sim")
 
 
-def unmatched_params_file_sections(argv: Sequence[str], fqn: str) -> list[str]:
+def unmatched_params_file_sections(argv: Sequence[str], fqn: str,
+                                   default_name: str | None = None) -> list[str]:
     """Notes on the sections of the ``--params-file`` files in ``argv`` that set parameters
     of no node named ``fqn`` (fully qualified): rcl ignores them without a word
     (a file keyed ``mpc_node:`` for the node ``mpc``). Sections of this package's other
-    nodes (:data:`PACKAGE_NODES`) in the same namespace are not named: a file shared by
-    ``mpc_node`` and ``sim_node``. Wildcards (``/**``, ``*``) match as in rcl; an
-    unreadable file is rcl's to report."""
+    nodes (:data:`PACKAGE_NODES` but the node's own ``default_name``) in the same namespace
+    are not named: a file shared by ``mpc_node`` and ``sim_node`` (a node renamed from
+    ``mpc`` still hears of an ``mpc:`` section). Wildcards (``/**``, ``*``) match as in
+    rcl; an unreadable file is rcl's to report."""
     notes = []
     for flag, path in itertools.pairwise(argv):
         if flag != "--params-file":
@@ -156,7 +159,7 @@ def unmatched_params_file_sections(argv: Sequence[str], fqn: str) -> list[str]:
         # a file shared by this package's nodes (README: one file for both) holds the
         # other node's section: that one is no mistake
         namespace = fqn.rsplit("/", 1)[0]
-        siblings = [f"{namespace}/{name}" for name in PACKAGE_NODES]
+        siblings = [f"{namespace}/{name}" for name in PACKAGE_NODES if name != default_name]
         keys = [k for k in _node_keys(data, [])
                 if not any(_matches(k, name) for name in (fqn, *siblings))]
         if keys:

@@ -12,11 +12,11 @@ are ignored.
 from __future__ import annotations
 
 import itertools
-import re
 
 import casadi as cs
 import numpy as np
 
+from horizon_mpc.codegen import function_name
 from horizon_mpc.problem.nodes import (
     NodeSelection,
     Values,
@@ -30,11 +30,9 @@ __all__ = ["Constraint", "Cost", "GeneralCost", "Term", "revisions", "stacked_ac
 
 def term_name(*parts: str) -> str:
     """A valid term name (:meth:`Problem.create_constraint`) from ``parts`` joined by ``_``,
-    e.g. a URDF frame name and a role: characters other than ASCII letters and digits
-    become single underscores, and a name that would not start with a letter gets ``t_``
-    in front (``term_name("leg-1.foot", "velocity")`` is ``leg_1_foot_velocity``)."""
-    text = re.sub(r"[^0-9A-Za-z]+", "_", "_".join(parts)).strip("_")
-    return text if text[:1].isalpha() else f"t_{text}"
+    e.g. a URDF frame name and a role: :func:`horizon_mpc.codegen.function_name` of it
+    (``term_name("leg-1.foot", "velocity")`` is ``leg_1_foot_velocity``)."""
+    return function_name("_".join(parts))
 
 
 # one counter for every term: a term's revision is unique, so a tuple of revisions names

@@ -73,7 +73,7 @@ log = logging.getLogger(__name__)
 # elastic steps in a row that cannot reduce the violation before "locally infeasible"
 INFEASIBLE_STEPS = 5
 
-# qrqp's iteration cap of the plain QP: at least this, else one per variable and row
+# qrqp's iteration cap of the plain QP: min(10000, max(QRQP_MIN_ITER, variables + rows))
 QRQP_MIN_ITER = 200
 
 # Accurate, quiet settings per QP plugin (the SQP needs precise multipliers).
@@ -210,7 +210,12 @@ class GnSqpSolver(NlpSolver):
         if not qp.stats().get("success", True):
             return None
         z, lg, lx = (sol[k].full().ravel() for k in ("x", "lam_a", "lam_x"))
-        return z[:nw], lg, lx[:nw], float(np.sum(z[nw:])), max(mu, rho)
+        slack = float(np.sum(z[nw:]))
+        if slack <= 1e-12 * max(1.0, float(np.max(np.abs(g), initial=0.0))):
+            # a feasible QP that only ran past the plain QP's cap: its step, and the
+            # merit's weight as the plain QP's would be (not the elastic penalty's)
+            return z[:nw], lg, lx[:nw], 0.0, max(mu, 1.1 * float(np.max(np.abs(lg), initial=0.0)))
+        return z[:nw], lg, lx[:nw], slack, max(mu, rho)
 
     # ------------------------------------------------------------------ solve
     def _solve(self) -> bool:
