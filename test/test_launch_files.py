@@ -97,4 +97,8 @@ def test_sim_mpc_gives_both_nodes_the_same_robot_as_declared_parameters(monkeypa
     # under ros2 run)
     for exe, kwargs in nodes.items():
         source = (ROOT / "horizon_mpc" / "nodes" / f"{exe}.py").read_text()
-        assert re.search(rf'node_name: str = "{kwargs["name"]}"', source), exe
+        assert re.search(rf'DEFAULT_NAME = "{kwargs["name"]}"', source), exe
+        assert "node_name: str = DEFAULT_NAME" in source, exe
+    from horizon_mpc.nodes.spin import PACKAGE_NODES  # a params file shared by both
+
+    assert set(PACKAGE_NODES) == {kwargs["name"] for kwargs in nodes.values()}
