@@ -391,6 +391,8 @@ def test_a_simulator_reset_is_not_blamed_on_clocks_that_differ(context, walking_
         assert not node.tick()
         assert [k for k, _ in said] == ["clock_back"] and "went back 14.980 s" in said[0][1], said
         assert node._base is None and node._joints[0] == new
+        assert not node.tick() and said[-1] == ("no_state", "no odom since the clock went back; "
+                                                "not planning")
         node._on_odom(odometry_to_msg(time_from_ns(new), q[:3], q[3:7], zeros, zeros))
         assert node.tick() and node._last_tick_stamp == new
         assert node.stale_skips == 1  # counted, WARN diagnostics

@@ -512,7 +512,8 @@ class MpcNode(MpcParameters, Node):
         if self._joints is None or self._base is None:
             missing = [n for n, x in (("joint_states", self._joints), ("odom", self._base))
                        if x is None]
-            self._warn("no_state", f"no {' and no '.join(missing)} received yet; not planning")
+            since = "since the clock went back" if self.plan is not None else "received yet"
+            self._warn("no_state", f"no {' and no '.join(missing)} {since}; not planning")
             return False
         joints, base = self._state_pair()
         stamp_ns = min(joints[0], base[0])
