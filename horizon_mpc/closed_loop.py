@@ -173,6 +173,12 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
                          f"{list(SIM_LOCKSTEP_PARAMETERS)}")
     if sim_parameters and mode != "lockstep":
         raise ValueError(f"{sorted(sim_parameters)}: lockstep mode only")
+    period = control_period(robot, mpc_parameters)
+    short = [i for i, seg in enumerate(segments) if seg.duration < period]
+    if short:  # the commands are sampled once per period: such a segment may never be sent
+        log.warning("segment(s) %s last less than the control period (%g s): their commands "
+                    "may never reach the MPC (the profile is sampled once per period)",
+                    short, period)
     loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
     domain_id = run_domain_id(mode, domain_id)
     try:

@@ -790,3 +790,16 @@ def test_a_robot_config_the_nodes_cannot_start_with_is_one_line_exit_2(tmp_path,
                          "--out", str(tmp_path / "out")]) == 2
         assert "cannot run: " in caplog.text and said in caplog.text
         assert "Traceback" not in caplog.text
+
+
+def test_segments_shorter_than_the_control_period_are_warned_about(monkeypatch, caplog):
+    """200 segments of 5 ms alternating 1 and 0 m/s ran as 1 m/s, exit 0: the profile is
+    sampled once per 20 ms control period (an auditor's profile)."""
+    from horizon_mpc import closed_loop
+    from horizon_mpc.closed_loop_profile import Segment
+
+    monkeypatch.setattr(closed_loop, "_run_lockstep", lambda robot, it, loop, *a: loop.rec)
+    segments = [Segment(0.005, vx=float(i % 2)) for i in range(4)] + [Segment(1.0)]
+    with caplog.at_level("WARNING", logger=closed_loop.__name__):
+        closed_loop.run("go2", segments)
+    assert "segment(s) [0, 1, 2, 3] last less than the control period (0.02 s)" in caplog.text

@@ -186,6 +186,21 @@ def test_future_first_point_starts_from_the_current_reference():
     np.testing.assert_allclose(ref.reference(0.5)[0], [0.0, 0.5, 1.0])  # halfway to row 0
 
 
+
+def test_a_future_first_point_out_of_reach_from_the_reference_is_refused():
+    """validate() checks the points' own segments; the one from the current reference to
+    a future first point was not checked: one point 1.5 ms ahead and 0.8 rad away drove
+    solo12's joints at 100 rad/s (20x the torque of the same step sent as 'now')."""
+    ref = ReferenceGenerator(3, timeout=10.0)
+    ref.hold(np.zeros(3), np.zeros(3))
+    far = JointTrajectoryCommand(JOINTS, 0.0, [0.0015], np.array([[0.0, 0.8, 0.0]]))
+    with pytest.raises(ValueError, match=r"0.0015 s ahead, asks joint 1 to move 0.8 .*533"):
+        ref.set_command(far.validate(JOINTS), now=0.0)
+    assert ref.holding  # nothing changed
+    near = JointTrajectoryCommand(JOINTS, 0.0, [0.02], np.array([[0.0, 0.8, 0.0]]))
+    ref.set_command(near.validate(JOINTS), now=0.0)  # 40 rad/s: a step, not a launch
+    assert not ref.holding
+
 @pytest.mark.parametrize("field, value", [("positions", 1e308), ("velocities", -1e300),
                                           ("efforts", 1e12)])
 def test_finite_but_absurd_values_are_refused(field, value):

@@ -214,7 +214,12 @@ class ReferenceGenerator:
                       np.array(tau_ff, dtype=float))
 
     def set_command(self, cmd: JointTrajectoryCommand, now: float) -> None:
-        """Follow ``cmd`` (validated, columns in simulator joint order) from sim time ``now``."""
+        """Follow ``cmd`` (validated, columns in simulator joint order) from sim time ``now``.
+
+        Raises:
+            ValueError: its first point lies ahead of ``now`` and reaching it from the current
+                reference is beyond :data:`PLAUSIBLE_SPEED` (nothing changes then).
+        """
         times = cmd.t0 + np.asarray(cmd.times, dtype=float)
         k, nj = cmd.positions.shape
         q = np.asarray(cmd.positions, dtype=float)
@@ -223,6 +228,15 @@ class ReferenceGenerator:
         tau = np.asarray(cmd.efforts, dtype=float) if cmd.efforts is not None else np.zeros((k, nj))
         if times[0] > now:  # start from where the reference is now
             q_now, v_now, tau_now = self.reference(now)
+            # that segment too must be a plausible speed (validate() sees only cmd's own):
+            # one future point 1.5 ms ahead and 0.8 rad away drove solo12 at 100 rad/s
+            speed = np.abs(q[0] - q_now) / (times[0] - now)
+            if np.any(speed > PLAUSIBLE_SPEED):
+                j = int(np.argmax(speed))
+                raise ValueError(
+                    f"the first point, {times[0] - now:.3g} s ahead, asks joint {j} to move "
+                    f"{abs(q[0, j] - q_now[j]):.3g} from the current reference ({speed[j]:.3g} "
+                    f"per s, beyond {PLAUSIBLE_SPEED:g})")
             times = np.concatenate(([now], times))
             q, v, tau = np.vstack((q_now, q)), np.vstack((v_now, v)), np.vstack((tau_now, tau))
         h = np.diff(times)[:, None]  # (K - 1, 1)
