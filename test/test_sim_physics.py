@@ -184,6 +184,9 @@ def test_push_on_a_foot_link_and_bad_pushes(go2):
         go2.push(go2.robot.root_link, [np.nan, 0.0, 0.0])
     with pytest.raises(ValueError, match="duration"):
         go2.push(go2.robot.root_link, [1.0, 0.0, 0.0], duration=0.0)
+    for odd in ("0.1", None, True):  # "0.1" was a TypeError from numpy
+        with pytest.raises(ValueError, match="a positive number of seconds"):
+            go2.push(go2.robot.root_link, [1.0, 0.0, 0.0], duration=odd)
 
 
 def test_reset_restores_the_start_state(go2):

@@ -46,6 +46,13 @@ def test_duplicate_joint_names_rejected():
         command(names=["a", "a", "b"]).validate()
 
 
+
+def test_joint_names_given_as_one_string_are_named_as_such():
+    """'LF_HAA' was split into its letters: 'duplicate joint names: ['A']'."""
+    cmd = JointTrajectoryCommand("abc", 0.0, [0.0], np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="a list of names, got the string 'abc'"):
+        cmd.validate()
+
 def test_mismatched_lengths_rejected():
     cmd = command()
     cmd.positions = cmd.positions[:, :2]

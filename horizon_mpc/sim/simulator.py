@@ -342,8 +342,10 @@ class Simulator:
         if max(np.max(np.abs(f)), np.max(np.abs(tq))) > PLAUSIBLE_WRENCH:
             raise ValueError(f"force/torque beyond the plausible {PLAUSIBLE_WRENCH:g} N (N m): "
                              f"{f}, {tq}")
-        if not (np.isfinite(duration) and duration > 0):
-            raise ValueError(f"push duration must be positive, got {duration}")
+        if (isinstance(duration, bool) or not isinstance(duration, (int, float, np.number))
+                or not (np.isfinite(duration) and duration > 0)):
+            raise ValueError(f"push duration must be a positive number of seconds, got "
+                             f"{duration!r}")
         end = self._steps + max(1, round(duration / self.dt))
         self._pushes.append((self.robot.link_index[link], f, tq, end))
 

@@ -89,6 +89,9 @@ class JointTrajectoryCommand:
         Raises:
             ValueError: with a message naming the problem.
         """
+        if isinstance(self.joint_names, str):  # list("LF_HAA") is its letters
+            raise ValueError(f"joint_names must be a list of names, got the string "
+                             f"{self.joint_names!r}")
         names = list(self.joint_names)
         if not names:
             raise ValueError("joint_names is empty")
