@@ -195,8 +195,10 @@ def test_fuzz_message_to_simulator(go2, data):
 def test_fuzz_reference_is_finite_and_continuous_at_points(times, velocities, t):
     k = len(times)
     rng = np.random.default_rng(k)
-    # close points move little (validate refuses more than PLAUSIBLE_SPEED between points)
-    gap = float(np.min(np.diff(times))) if k > 1 else 1.0
+    # close points move little (validate refuses more than PLAUSIBLE_SPEED between points,
+    # and set_command from the reference, 0 at now = 0, to a first point ahead of it)
+    ends = [0.0, *times] if times[0] > 0 else times
+    gap = float(np.min(np.diff(ends))) if len(ends) > 1 else 1.0
     scale = min(1.0, 10.0 * gap)
     cmd = JointTrajectoryCommand(JOINTS, 0.0, np.array(times), scale * rng.normal(size=(k, 3)),
                                  rng.normal(size=(k, 3)) if velocities else None, None)
