@@ -263,14 +263,9 @@ def compile_function(
             mark_used(lib)
         else:
             _build(fn, lib)
-    except OSError as exc:  # no compiler, a cache folder that cannot be written
-        # by folder and reason: the path named a random build folder, and each of a
-        # model's functions warned again
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        _warn_uncompiled(f"{folder}: {reason}")
-        return fn
-    except CompilerError as exc:  # a compiler that fails (a bad $CC or -march)
-        _warn_uncompiled(_compiler_error(exc))
+    except (OSError, CompilerError) as exc:  # no compiler or a failing one, a cache
+        # folder that cannot be written
+        _warn_uncompiled(_uncompiled_reason(exc, folder))
         return fn
     try:
         compiled = cs.external(fn.name(), str(lib))
@@ -281,7 +276,7 @@ def compile_function(
         try:
             _build(fn, lib)
         except (OSError, CompilerError) as again:
-            _warn_uncompiled(_compiler_error(again))
+            _warn_uncompiled(_uncompiled_reason(again, folder))
             return fn
         try:
             compiled = cs.external(fn.name(), str(lib))
@@ -299,9 +294,12 @@ class CompilerError(RuntimeError):
     """The C compiler ran and failed (:func:`build_shared_library`)."""
 
 
-def _compiler_error(exc: Exception) -> str:
-    """The reason of a failed build, the same for every function (the warning is said once
-    per reason): the compiler's first error line, else the last line of its message."""
+def _uncompiled_reason(exc: OSError | CompilerError, folder: Path) -> str:
+    """Why a build failed, the same for every function (the warning is said once per
+    reason; a path named each function's random build folder): an OSError's folder and
+    reason, or the compiler's first error line, else the last line of its message."""
+    if isinstance(exc, OSError):
+        return f"{folder}: {exc.strerror or exc}"
     lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
     errors = [line for line in lines[1:] if "error" in line.lower()]
     return f"the C compiler failed: {(errors or lines or [repr(exc)])[0 if errors else -1]}"

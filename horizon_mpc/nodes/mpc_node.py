@@ -490,14 +490,16 @@ class MpcNode(MpcParameters, Node):
         if prepared is not None and self._joints_recent and self._base_recent:
             st = self.mpc.settings
             window = max(st.max_extrapolation, st.feedback_tolerance) * NS_PER_S
-            # the nearest pair, else the nearest of each stream (separate drivers, whose
-            # stamps meet now and then or never: until session 25 their newest of each)
-            options = [min(pairs, key=lambda pair: abs(pair[0][0] - prepared))] if pairs else []
-            options.append(tuple(min(recent, key=lambda x: abs(x[0] - prepared))
-                                 for recent in (self._joints_recent, self._base_recent)))
-            for nearest in options:
-                if max(abs(x[0] - prepared) for x in nearest) <= window:
+            if pairs:
+                nearest = min(pairs, key=lambda pair: abs(pair[0][0] - prepared))
+                if abs(nearest[0][0] - prepared) <= window:
                     return nearest
+            # else the nearest of each stream (separate drivers, whose stamps meet now and
+            # then or never: until session 25 their newest of each)
+            nearest = tuple(min(recent, key=lambda x: abs(x[0] - prepared))
+                            for recent in (self._joints_recent, self._base_recent))
+            if max(abs(x[0] - prepared) for x in nearest) <= window:
+                return nearest
         if pairs:
             return pairs[-1]
         return self._joints, self._base

@@ -88,6 +88,12 @@ QP_DEFAULTS: dict[str, dict[str, Any]] = {
 }
 
 
+def _merit_weight(mu: float, lam_g: np.ndarray) -> float:
+    """The l1 merit's constraint weight after a step: at least its value so far, and above
+    the step's largest multiplier (an exact penalty)."""
+    return max(mu, 1.1 * float(np.max(np.abs(lam_g), initial=0.0)))
+
+
 class GnSqpSolver(NlpSolver):
     """Gauss-Newton SQP with an l1-merit line search (see the module docstring).
 
@@ -195,7 +201,7 @@ class GnSqpSolver(NlpSolver):
                  x0=np.zeros(nw), lam_a0=lam_g, lam_x0=lam_x)
         if qp.stats().get("success", True):
             d, lg, lx = (sol[k].full().ravel() for k in ("x", "lam_a", "lam_x"))
-            return d, lg, lx, 0.0, max(mu, 1.1 * float(np.max(np.abs(lg), initial=0.0)))
+            return d, lg, lx, 0.0, _merit_weight(mu, lg)
         self._elastic_steps += 1
         rho = max(self.opts["elastic_penalty"], mu)
         qp = self._qp_solver(elastic=True)
@@ -214,7 +220,7 @@ class GnSqpSolver(NlpSolver):
         if slack <= 1e-12 * max(1.0, float(np.max(np.abs(g), initial=0.0))):
             # a feasible QP that only ran past the plain QP's cap: its step, and the
             # merit's weight as the plain QP's would be (not the elastic penalty's)
-            return z[:nw], lg, lx[:nw], 0.0, max(mu, 1.1 * float(np.max(np.abs(lg), initial=0.0)))
+            return z[:nw], lg, lx[:nw], 0.0, _merit_weight(mu, lg)
         return z[:nw], lg, lx[:nw], slack, max(mu, rho)
 
     # ------------------------------------------------------------------ solve
