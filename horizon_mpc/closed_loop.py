@@ -547,6 +547,13 @@ def _interrupt(*_: object) -> None:
     raise KeyboardInterrupt
 
 
+def _prog() -> str:
+    """The usage's program name: the executable's (``closed_loop``, also under ``ros2 run``)
+    when run as one, else the module's."""
+    name = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
+    return "closed_loop" if name == "closed_loop" else "python -m horizon_mpc.closed_loop"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI: run the closed loop and write summary.json, plots and a GIF into ``--out``.
 
@@ -558,8 +565,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     from horizon_mpc.closed_loop_report import summarise, write_report
 
-    ap = argparse.ArgumentParser(prog="python -m horizon_mpc.closed_loop",
-                                 description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog=_prog(), description=__doc__.splitlines()[0])
     ap.add_argument("--robot", default="go2", help="robot config name (default go2)")
     ap.add_argument("--profile", default=DEFAULT_PROFILE,
                     help="command profile: a YAML file, or the name of one in "

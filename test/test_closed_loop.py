@@ -803,3 +803,16 @@ def test_segments_shorter_than_the_control_period_are_warned_about(monkeypatch, 
     with caplog.at_level("WARNING", logger=closed_loop.__name__):
         closed_loop.run("go2", segments)
     assert "segment(s) [0, 1, 2, 3] last less than the control period (0.02 s)" in caplog.text
+
+
+@pytest.mark.parametrize("argv0, prog", [
+    ("/opt/ws/install/horizon_mpc/lib/horizon_mpc/closed_loop", "closed_loop"),  # ros2 run
+    ("/venv/bin/closed_loop", "closed_loop"),
+    ("/src/horizon_mpc/closed_loop.py", "python -m horizon_mpc.closed_loop")])
+def test_the_usage_names_the_program_the_way_it_was_run(monkeypatch, capsys, argv0, prog):
+    """`ros2 run horizon_mpc closed_loop --help` printed `python -m ...` as its usage."""
+    monkeypatch.setattr(sys, "argv", [argv0, "--help"])
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out.startswith(f"usage: {prog} [-h]")
