@@ -319,3 +319,25 @@ def test_auto_goes_on_with_the_box_in_the_next_converging_calls():
     assert solver.solve() and solver.stats.extra["box_from"] == 0
     assert solver.stats.iterations <= 2
     assert solver.stats.cost == pytest.approx(cost, rel=1e-8)
+
+
+def test_a_converging_call_from_another_guess_starts_without_the_kept_box():
+    """The box an 'auto' solve went on with was kept for every later converging call: a
+    cart-pole solved from its guess in 78 iterations ended at max_iter, 4x the cost and
+    violation 10, when solved again from the same guess (a QA finding). The box is kept for
+    the call's own warm start (solution written back, or shifted) only."""
+    prb, var = build_cartpole(60, cart_limit=1.0, u_max=30.0, w_velocity=0.0,
+                              w_effort=2.0)
+    guess = {name: v.initial_guess for name, v in var.items()}
+    solver = make_solver("ilqr", prb)
+    assert solver.solve() and solver.stats.extra["box_from"] == 20, solver.stats.status
+    cost = solver.stats.cost
+    assert solver.solve() and solver.stats.extra["box_from"] == 0  # its own warm start
+    assert solver.stats.iterations <= 2
+    for name, v in var.items():  # the guess the first solve started from
+        v.set_initial_guess(guess[name])
+    assert solver.solve(), solver.stats.status
+    assert solver.stats.extra["box_from"] == 20
+    assert solver.stats.cost == pytest.approx(cost, rel=1e-6)
+    solver.shift()  # the solution shifted is still the solver's own warm start
+    assert solver.solve() and solver.stats.extra["box_from"] == 0

@@ -185,6 +185,8 @@ class IlqrSolver(Solver):
         super().__init__(prb, opts)
         self._auto_box = False  # 'auto': this call went on with the box (_switch_to_box)
         self._box_kept = False  # 'auto': a converging call did: the next ones start with it
+        # ... from the point it ended at (or that point shifted): (X, U) as stacked guesses
+        self._box_start: tuple[np.ndarray, np.ndarray] | None = None
         self._shifted = False  # shift() since the last call (see _begin_call)
         # nodes whose projected rows went back to the augmented Lagrangian (_demote_dependent;
         # for the solver's life: a warm re-solve keeps their multipliers)
@@ -720,8 +722,11 @@ class IlqrSolver(Solver):
         self._prepared = None
         # 'auto': a converging call after one that went on with the box starts with it (a
         # re-solve from that call's optimum took the 20 augmented-Lagrangian iterations again,
-        # moving away and back: 23 iterations against 1)
-        self._auto_box = self._box_kept and not self.opts["rti"] and self._auto_applies()
+        # moving away and back: 23 iterations against 1), if it starts where that call
+        # ended: from a cold guess the box diverges (a cart-pole solved in 78 iterations
+        # from its guess ended at max_iter, 4x the cost, re-solved from the same guess)
+        self._auto_box = (self._box_kept and not self.opts["rti"] and self._auto_applies()
+                          and self._starts_where_the_box_ended())
         self._box_from = 0 if self._auto_box else None
         if self._shifted and not self.opts["rti"]:
             # a converging solve of a shifted (receding) problem starts from the initial
@@ -846,6 +851,8 @@ class IlqrSolver(Solver):
             converged = stepped and self._rti_success(ev)
         elif not converged:
             self._after_failed_solve()
+        if not rti:
+            self._box_start = (self.X.T.copy(), self.U.T.copy()) if self._auto_box else None
         self.stats.iterations = it
         self.stats.status = status
         self.stats.success = bool(converged)
@@ -991,9 +998,22 @@ class IlqrSolver(Solver):
         return st.success
 
     # ------------------------------------------------------------------ receding horizon
+    def _starts_where_the_box_ended(self) -> bool:
+        """Whether the problem's guesses are the point the last converging call ended at
+        with the box (its solution written back), or that point shifted."""
+        if self._box_start is None:
+            return False
+        X, U = self._box_start
+        prb = self.prb
+        return (np.array_equal(prb.stacked("state", copy=False), X)
+                and np.array_equal(prb.stacked("input", copy=False), U))
+
     def shift(self) -> None:
         """Shift the problem's guesses/parameters and the AL multipliers one node back."""
+        follows = self._starts_where_the_box_ended()
         super().shift()
+        if follows:  # the shifted warm start still starts where the box ended
+            self._box_start = (self.prb.stacked("state"), self.prb.stacked("input"))
         self._al.shift()
         self._prepared = None
         self._shifted = True
@@ -1004,6 +1024,7 @@ class IlqrSolver(Solver):
         'auto' box mode they kept, rows they moved to the augmented Lagrangian)."""
         self.reset_multipliers()
         self._auto_box = self._box_kept = False
+        self._box_start = None
         self._box_from = None
         self._demoted[:] = False
 
