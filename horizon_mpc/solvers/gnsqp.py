@@ -7,7 +7,8 @@ solves the QP
     s.t.   lbg - g(w) <= J_g(w) d <= ubg - g(w),     lbx - w <= d <= ubx - w
 
 through CasADi's ``conic`` interface (sparsity fixed, QP solver built once; variables and
-constraints sorted stage-wise so the KKT matrix is banded). When the linearised constraints
+constraints sorted stage-wise so the KKT matrix is banded), warm-started with the last
+multipliers and, if that fails, once more cold. When the linearised constraints
 are inconsistent, an *elastic* QP (l1-penalised slacks on every row, penalty
 ``elastic_penalty``) gives the step instead. The step ``w += alpha d`` is chosen by
 backtracking (Armijo, non-monotone over the last ``nonmonotone`` merit values, which lets
@@ -197,8 +198,14 @@ class GnSqpSolver(NlpSolver):
         None when both fail."""
         nw, ng = w.size, g.size
         qp = self._qp_solver()
-        sol = qp(h=H, g=grad, a=J, lba=lbg - g, uba=ubg - g, lbx=lbx - w, ubx=ubx - w,
-                 x0=np.zeros(nw), lam_a0=lam_g, lam_x0=lam_x)
+        data = dict(h=H, g=grad, a=J, lba=lbg - g, uba=ubg - g, lbx=lbx - w, ubx=ubx - w,
+                    x0=np.zeros(nw))
+        sol = qp(**data, lam_a0=lam_g, lam_x0=lam_x)
+        if not qp.stats().get("success", True) and (lam_g.any() or lam_x.any()):
+            # the last step's multipliers can start an active-set QP solver on a cycle: a
+            # rate-limited swing-up's feasible QPs ran qrqp to its cap warm, ~12 iterations
+            # cold, and the elastic QP's steps then ended the solve as a failure
+            sol = qp(**data)
         if qp.stats().get("success", True):
             d, lg, lx = (sol[k].full().ravel() for k in ("x", "lam_a", "lam_x"))
             return d, lg, lx, 0.0, _merit_weight(mu, lg)
