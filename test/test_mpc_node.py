@@ -52,6 +52,7 @@ from horizon_mpc.nodes.mpc_inputs import (
     joints_from_joint_state,
 )
 from horizon_mpc.nodes.mpc_node import MpcNode
+from horizon_mpc.nodes.throttling import problem_kind
 from horizon_mpc.posture import standing_configuration
 
 assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"  # set by conftest.py
@@ -610,7 +611,9 @@ def test_rejected_commands_keep_the_last_valid_one_until_its_timeout_and_say_so(
         h.pub_cmd.publish(twist(float("nan"), 0.0, 0.0))
     h.spin_until(lambda: h.node.rejected["cmd_vel"] == 3)
     np.testing.assert_array_equal(h.node.current_command(), [0.3, 0.0, 0.0])
-    assert "the last valid one stands until cmd_timeout (0.2 s)" in said["cmd_vel"]
+    rejected = [text for kind, text in said.items() if kind.startswith("cmd_vel:")]
+    assert len(rejected) == 1  # one problem (throttled per problem)
+    assert "the last valid one stands until cmd_timeout (0.2 s)" in rejected[0]
     time.sleep(0.3)
     np.testing.assert_array_equal(h.node.current_command(), [0.0, 0.0, 0.0])
     assert said["cmd_timeout"] == ("no valid cmd_vel for more than 0.2 s (3 rejected "
@@ -1022,6 +1025,47 @@ def test_a_timer_tick_plans_from_the_state_of_the_prepared_time_when_it_came(con
         assert node.tick()
         assert time_to_ns(sent.msgs[-1].header.stamp) == start + 6 * period + state
         assert node.mpc.prepare_misses == misses + 1
+    finally:
+        walking_mpc.settings.prepare_ahead = False  # the fixture is shared
+        node.destroy_node()
+
+
+@pytest.mark.parametrize("trigger", ["state", "timer"])
+def test_after_a_skipped_state_the_ticks_plan_from_the_newest_again(context, walking_mpc,
+                                                                     trigger):
+    """A state skipped as stale (the node's clock jumped: use_sim_time toggled) left the
+    preparation's time on it: every later tick planned from the state before the newest,
+    and a lockstep simulator, which steps on the answer to its newest state, waited out
+    its lockstep_timeout at each step (a QA finding)."""
+    node = sim_time_node(context, walking_mpc, trigger=trigger, prepare_ahead=True)
+    try:
+        sent = Sent()
+        node._pub_traj, node._pub_path, node._pub_diag = sent, Sent(), Sent()
+        _, q = standing_configuration(node.mpc.cfg)
+        start, period = 10 * NS_PER_S, 20_000_000
+
+        def step(k: int, clock_jump_ns: int = 0) -> None:
+            ns = start + k * period
+            # the state arrives on the node's clock, which may have jumped ahead
+            node.get_clock().set_ros_time_override(RosTime(nanoseconds=ns + clock_jump_ns))
+            stamp, zeros = time_from_ns(ns), np.zeros(3)
+            node._on_joint_state(joint_state_to_msg(stamp, node.joint_names, q[7:],
+                                                    np.zeros(len(q) - 7)))
+            node._on_odom(odometry_to_msg(stamp, q[:3], q[3:7], zeros, zeros))
+            if trigger == "timer":
+                node.tick()
+
+        for k in range(3):
+            step(k)
+        assert time_to_ns(sent.msgs[-1].header.stamp) == start + 2 * period
+        step(3, clock_jump_ns=10 * NS_PER_S)
+        assert node.stale_skips >= 1
+        answered = len(sent.msgs)
+        for k in range(4, 8):
+            step(k)
+            assert time_to_ns(sent.msgs[-1].header.stamp) == start + k * period
+        assert len(sent.msgs) == answered + 4
+        assert node.mpc.solver.stats.status == "feedback"  # prepared ticks again
     finally:
         walking_mpc.settings.prepare_ahead = False  # the fixture is shared
         node.destroy_node()
@@ -1465,13 +1509,49 @@ def test_the_librarys_warnings_reach_the_ros_loggers(monkeypatch):
 def test_input_notes_of_different_kinds_are_throttled_apart():
     """A clamp note must not silence an 'ignored fields' note of the same topic; the same
     note with other numbers stays one kind."""
-    from horizon_mpc.nodes.mpc_node import _note_kind
-
-    clamp = _note_kind("cmd_vel", "cmd_vel [0.9, 0.0, 0.0] clamped to the limits [0.5, 0.3, 1]")
-    clamp2 = _note_kind("cmd_vel", "cmd_vel [1.5, -0.2, 0.0] clamped to the limits [0.5, 0.3, 1]")
-    ignored = _note_kind("cmd_vel", "cmd_vel linear.z/angular.x/angular.y are ignored")
+    clamp = problem_kind("cmd_vel_note",
+                         "cmd_vel [0.9, 0.0, 0.0] clamped to the limits [0.5, 0.3, 1]")
+    clamp2 = problem_kind("cmd_vel_note",
+                          "cmd_vel [1.5, -0.2, 0.0] clamped to the limits [0.5, 0.3, 1]")
+    ignored = problem_kind("cmd_vel_note", "cmd_vel linear.z/angular.x/angular.y are ignored")
     assert clamp == clamp2 != ignored
-    assert _note_kind("odom", "x") != _note_kind("cmd_vel", "x")
+    assert problem_kind("odom", "x") != problem_kind("cmd_vel", "x")
+    # rejections: other joints or values are the same problem, another problem is not
+    lacks = problem_kind("joint_states", "JointState lacks joints ['RR_calf_joint']")
+    assert lacks == problem_kind("joint_states", "JointState lacks joints ['FL_hip', 'x']")
+    assert lacks != problem_kind("joint_states", "positions of 'FL_hip' not finite (nan)")
+
+
+def test_rejections_of_different_problems_on_one_topic_are_each_named(context, walking_mpc):
+    """Rejections were throttled per topic: of three bad joint states 0.3 s apart only the
+    first was named (a missing joint), not the NaN nor the wrong array length after it (a
+    QA finding)."""
+    node = sim_time_node(context, walking_mpc)
+    logged: list[str] = []
+
+    class Logger:
+        def warning(self, text: str) -> None:
+            logged.append(text)
+
+    node.get_logger = Logger
+    try:
+        _, q = standing_configuration(node.mpc.cfg)
+        names, pos = list(node.joint_names), q[7:]
+        stamp = time_from_ns(10 * NS_PER_S)
+        for _ in range(2):  # the second round: each problem again, throttled
+            node._on_joint_state(joint_state_to_msg(stamp, names[:-1], pos[:-1],
+                                                    np.zeros(len(pos) - 1)))
+            node._on_joint_state(joint_state_to_msg(stamp, names, np.full(len(pos), np.nan),
+                                                    np.zeros(len(pos))))
+            bad = joint_state_to_msg(stamp, names, pos, np.zeros(len(pos)))
+            bad.velocity = [0.0] * (len(pos) - 2)
+            node._on_joint_state(bad)
+        assert node.rejected["joint_states"] == 6
+        assert len(logged) == 3, logged
+        assert all(text.startswith("rejected joint_states") for text in logged)
+        assert len({problem_kind("", text) for text in logged}) == 3
+    finally:
+        node.destroy_node()
 
 
 def test_timing_settings_outside_where_the_robot_walked_are_warned_about():

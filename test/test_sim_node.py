@@ -322,9 +322,21 @@ def test_bad_inputs_are_rejected_and_the_sim_keeps_running(harness_factory):
     bad_nan.points[1].positions[3] = float("nan")
     bad_time = trajectory(h.sim, 0)
     bad_time.points[1].time_from_start = duration_from_seconds(0.0)
+    logged: list[str] = []  # each problem named (throttled per problem, not per topic)
+
+    class Logger:
+        def warning(self, text: str) -> None:
+            logged.append(text)
+
+        def __getattr__(self, name: str):
+            return getattr(logger, name)
+
+    logger, h.sim.get_logger = h.sim.get_logger(), Logger
     for msg in (good, bad_names, bad_nan, bad_time):
         h.trajectory_pub.publish(msg)
     h.spin_until(lambda: h.sim.rejected_trajectories >= 3)
+    rejected = [text for text in logged if text.startswith("rejected joint_trajectory")]
+    assert len(rejected) == 3, logged
     # the good command is still the one in force
     q_ref = h.sim.sim.reference.reference(h.sim.sim.time)[0]
     np.testing.assert_allclose(q_ref, h.sim.sim.q_start[7:] + 0.05)

@@ -13,7 +13,6 @@ from __future__ import annotations
 import functools
 import gc
 import math
-import re
 import sys
 import textwrap
 import time
@@ -63,6 +62,7 @@ from horizon_mpc.nodes.mpc_parameters import (
 )
 from horizon_mpc.nodes.robot_description import check_urdf_text
 from horizon_mpc.nodes.spin import spin_until_signal
+from horizon_mpc.nodes.throttling import problem_kind
 
 __all__ = ["MpcNode", "main", "robot_model"]
 
@@ -162,6 +162,9 @@ class MpcNode(MpcParameters, Node):
         self.last_prepare_time = math.nan  # s: the next tick's preparation after it
         self._period_ns = round(self.period * NS_PER_S)
         self._prepared_ns = 0  # the tick time (node clock, ns) the preparation is for
+        # a state skipped since the preparation (stale, out of order, ...): the prepared
+        # time is then behind the states, and the next tick plans from the newest (_state_pair)
+        self._skipped_since_prepare = False
         self._recent_misses: deque[bool] = deque(maxlen=50)  # prepare misses of recent ticks
         # N: a plan's constraint violation beyond which its status is WARN (INFEASIBLE_PLAN)
         self._infeasible_violation = INFEASIBLE_PLAN * mpc.model.mass * 9.81
@@ -319,7 +322,7 @@ class MpcNode(MpcParameters, Node):
         if isinstance(note, LayoutNote):
             self._warn_once(note)
         else:
-            self._warn(_note_kind(topic, note), note)
+            self._warn(problem_kind(f"{topic}_note", note), note)
 
     def _skip_stale(self, age: float, kind: str, text: str, stamp_ns: int,
                     now_ns: int, force: bool = False) -> bool:
@@ -328,6 +331,7 @@ class MpcNode(MpcParameters, Node):
         (``force``: whatever the node clock says). Returns False (no trajectory published)."""
         self.last_state_age = age
         self.stale_skips += 1
+        self._skipped_since_prepare = True
         self._warn(kind, text)
         self._publish_diagnostics(None, stamp_ns, now_ns, force=force)
         return False
@@ -405,7 +409,7 @@ class MpcNode(MpcParameters, Node):
             qj, vj, notes = joints_from_joint_state(msg, self.joint_names, self._joint_limits)
         except ValueError as exc:
             self.rejected["joint_states"] += 1
-            self._warn("joint_states", f"rejected joint_states: {exc}")
+            self._warn(problem_kind("joint_states", str(exc)), f"rejected joint_states: {exc}")
             return
         for note in notes:
             self._note("joint_states", note)
@@ -418,7 +422,7 @@ class MpcNode(MpcParameters, Node):
             pos, quat, lin, ang, notes = base_from_odometry(msg)
         except ValueError as exc:
             self.rejected["odom"] += 1
-            self._warn("odom", f"rejected odom: {exc}")
+            self._warn(problem_kind("odom", str(exc)), f"rejected odom: {exc}")
             return
         for note in notes:
             self._note("odom", note)
@@ -439,7 +443,8 @@ class MpcNode(MpcParameters, Node):
         except ValueError as exc:
             self.rejected["cmd_vel"] += 1
             self._cmd_rejected += 1
-            self._warn("cmd_vel", f"rejected cmd_vel: {exc}; the last valid one stands until "
+            self._warn(problem_kind("cmd_vel", str(exc)),
+                       f"rejected cmd_vel: {exc}; the last valid one stands until "
                        f"cmd_timeout ({self.cmd_timeout:g} s) after it came, then zero")
             return
         if self.mpc.scheduler.gait.stands and np.any(cmd != 0.0):
@@ -483,10 +488,18 @@ class MpcNode(MpcParameters, Node):
         measures them), the pair nearest to it within the MPC's ``feedback_tolerance``
         (and ``max_extrapolation``), whose feedback step the preparation serves; with
         separate drivers (no stamp shared), the joint state and the base state nearest to
-        it, each within that window (the plan's stamp is the older)."""
+        it, each within that window (the plan's stamp is the older).
+
+        Never an older pair than the newest: with trigger 'state' (the pair that triggered
+        the tick; a lockstep simulator waits for its answer), or after a state was skipped
+        since the preparation (its prepared time stays behind: a lockstep node answered
+        every state with the one before, and the simulator waited out each step)."""
+        if self.trigger == "state" and self._joints[0] == self._base[0]:
+            return self._joints, self._base
         base_stamps = {b[0]: b for b in self._base_recent}
         pairs = [(j, base_stamps[j[0]]) for j in self._joints_recent if j[0] in base_stamps]
-        prepared = self._prepared_ns if self.mpc.prepared_for is not None else None
+        prepared = self._prepared_ns if (self.mpc.prepared_for is not None
+                                         and not self._skipped_since_prepare) else None
         if prepared is not None and self._joints_recent and self._base_recent:
             st = self.mpc.settings
             window = max(st.max_extrapolation, st.feedback_tolerance) * NS_PER_S
@@ -537,6 +550,7 @@ class MpcNode(MpcParameters, Node):
                 and now_ns >= self._last_tick_stamp:
             # out of order (the node's clock did not go back, as at a simulator reset)
             self.stale_skips += 1
+            self._skipped_since_prepare = True
             self._warn("order", f"a state stamped {(self._last_tick_stamp - stamp_ns) / 1e6:.1f}"
                        " ms before the one the last plan was made from: not planning from it"
                        + _unset_hint(joints[0], base[0]))
@@ -611,6 +625,7 @@ class MpcNode(MpcParameters, Node):
         if self.mpc.settings.prepare_ahead:
             try:
                 self._prepared_ns = grid_ns + self._period_ns
+                self._skipped_since_prepare = False
                 self.mpc.prepare(self._prepared_ns / NS_PER_S, cmd)
             except Exception as exc:  # noqa: BLE001 - as above; the next tick runs whole
                 self.solver_errors += 1
@@ -766,13 +781,6 @@ def _unset_hint(joints_ns: int, base_ns: int) -> str:
 def message_type_name(msg_type: type) -> str:
     """The ROS name of a message class, as the graph gives it: ``geometry_msgs/msg/Twist``."""
     return f"{msg_type.__module__.split('.')[0]}/msg/{msg_type.__name__}"
-
-
-def _note_kind(topic: str, note: str) -> str:
-    """The throttling kind of an input note: its topic and its text without the numbers,
-    so a clamp warning does not hide a note of another kind (ignored fields) on the same
-    topic, while the same note with other values stays throttled."""
-    return f"{topic}_note:" + re.sub(r"[-+]?\d+(\.\d*)?([eE][-+]?\d+)?", "#", note)
 
 
 def model_source(cfg: RobotConfig, urdf_path: str = "", robot_description: str = "") -> str:

@@ -51,6 +51,7 @@ from horizon_mpc.nodes.declare import declare as declare_parameter
 from horizon_mpc.nodes.declare import float_range
 from horizon_mpc.nodes.robot_description import description_file
 from horizon_mpc.nodes.spin import spin_until_signal
+from horizon_mpc.nodes.throttling import problem_kind
 from horizon_mpc.sim.simulator import Simulator
 
 __all__ = ["SimNode", "main"]
@@ -413,8 +414,8 @@ class SimNode(Node):
             self.sim.set_trajectory(cmd)
         except ValueError as exc:
             self.rejected_trajectories += 1
-            self._warn("trajectory", f"rejected joint_trajectory: {exc}; keeping the last "
-                       "good command")
+            self._warn(problem_kind("trajectory", str(exc)),
+                       f"rejected joint_trajectory: {exc}; keeping the last good command")
         if release:
             self.awaiting_stamp_ns = None
             self.step_once()
@@ -426,7 +427,7 @@ class SimNode(Node):
                           vector3_from_msg(msg.wrench.torque), self.push_duration)
         except ValueError as exc:
             self.rejected_wrenches += 1
-            self._warn("wrench", f"rejected external_wrench: {exc}")
+            self._warn(problem_kind("wrench", str(exc)), f"rejected external_wrench: {exc}")
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.sim.reset(reset_time=False)
