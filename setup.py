@@ -26,8 +26,8 @@ PACKAGE = "horizon_mpc"
 # launcher files scripts/<name> (checked against this dict by test/test_package.py),
 # for the data files installed into lib/horizon_mpc.
 EXECUTABLES = {
-    "mpc_node": "horizon_mpc.nodes.mpc_node:main",
-    "sim_node": "horizon_mpc.nodes.sim_node:main",
+    "mpc_node": "horizon_mpc.nodes.launcher:mpc_node",
+    "sim_node": "horizon_mpc.nodes.launcher:sim_node",
     "closed_loop": "horizon_mpc.closed_loop:main",
     "motion": "horizon_mpc.motions.cli:main",
 }

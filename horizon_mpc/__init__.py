@@ -12,9 +12,24 @@ import os
 # Effective when horizon_mpc is imported before numpy; users may override the variable.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from horizon_mpc.problem import Problem  # noqa: E402
-from horizon_mpc.solvers import make_solver  # noqa: E402
+from typing import TYPE_CHECKING  # noqa: E402
+
+if TYPE_CHECKING:
+    from horizon_mpc.problem import Problem
+    from horizon_mpc.solvers import make_solver
 
 __version__ = "0.1.0"
 
 __all__ = ["Problem", "__version__", "make_solver"]
+
+
+def __getattr__(name: str) -> object:
+    # the API on first use: importing the package alone (a node's entry point, which takes
+    # the signals first: horizon_mpc.nodes.launcher) does not import CasADi and numpy
+    if name == "Problem":
+        from horizon_mpc.problem import Problem
+        return Problem
+    if name == "make_solver":
+        from horizon_mpc.solvers import make_solver
+        return make_solver
+    raise AttributeError(f"module 'horizon_mpc' has no attribute {name!r}")

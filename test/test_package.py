@@ -13,6 +13,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -206,6 +207,41 @@ def test_ros2_run_starts_the_executable_without_an_activated_venv(exe, venv_pack
                           text=True, timeout=300)
     assert proc.returncode == 0, f"{exe}: {proc.stderr.strip()[-2000:]}"
     assert "usage" in proc.stdout.lower(), proc.stdout[-2000:]
+
+
+def _catches(pid: int, sig: int) -> bool:
+    """Whether process ``pid`` has a handler for ``sig`` (its SigCgt mask in /proc)."""
+    status = Path(f"/proc/{pid}/status").read_text()
+    caught = int(next(ln for ln in status.splitlines() if ln.startswith("SigCgt:")).split()[1],
+                 16)
+    return bool(caught >> (sig - 1) & 1)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.parametrize("exe", ["mpc_node", "sim_node"])
+def test_a_signal_while_the_node_imports_its_modules_exits_0(exe, sig, venv_package_prefix,
+                                                              tmp_path):
+    """The ~0.5 s of imports before a node takes the signals ended a SIGTERM there with exit
+    code 143 (SIGINT: a KeyboardInterrupt traceback), as `ros2 launch` stopping a node it
+    just started would see; the launcher takes them first (nodes/launcher.py). The signal
+    goes as soon as the process catches SIGTERM (its /proc status; Python itself only
+    catches SIGINT), well before the imports end."""
+    path = venv_package_prefix / "lib" / PACKAGE / exe
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    proc = subprocess.Popen([str(path)], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not _catches(proc.pid, signal.SIGTERM):
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.001)
+        proc.send_signal(sig)
+        out, _ = proc.communicate(timeout=60)
+        assert proc.returncode == 0, out[-2000:]
+        assert "Traceback" not in out, out[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
 
 
 def test_launcher_falls_back_to_the_python3_on_path_outside_a_venv(tmp_path):
