@@ -699,3 +699,36 @@ def test_go2_switches_from_walk_to_trot_without_a_lunge():
     speed = (x[5:] - x[:-5]) / (t[5:] - t[:-5])  # over 0.1 s
     assert speed.max() < 0.6 and z.min() > 0.85 * h0
     assert (x[-1] - x[0]) / (t[-1] - t[0]) == pytest.approx(0.3, abs=0.1)
+
+
+def test_failed_ticks_are_logged_once_per_burst_and_at_most_every_two_seconds(monkeypatch,
+                                                                               caplog):
+    """Every other tick failing (hostile odometry) logged 'ILQR failed' 10 times in 2 s:
+    bursts closer than FAILURE_LOG_PERIOD are counted into the next line."""
+    import logging
+    from types import SimpleNamespace
+
+    from horizon_mpc.mpc import controller
+    from horizon_mpc.mpc.controller import WalkingMpc
+
+    clock = [100.0]
+    monkeypatch.setattr(controller.time, "monotonic", lambda: clock[0])
+    good = {"x": np.zeros((2, 3)), "u": np.zeros((1, 2))}
+    bad = {"x": np.full((2, 3), np.nan), "u": np.zeros((1, 2))}
+    mpc = SimpleNamespace(solver=SimpleNamespace(solution=good, stats=SimpleNamespace(
+        constraint_violation=0.0, cost=1.0, status="rti")), divergence_threshold=1e3,
+        failures=0, _failure_log=(-math.inf, 0))
+    caplog.set_level(logging.WARNING, logger="horizon_mpc.mpc.controller")
+    for k in range(20):  # 20 ticks 0.1 s apart, every other one failing: 10 bursts in 2 s
+        mpc.solver.solution = bad if k % 2 == 0 else good
+        assert WalkingMpc._healthy(mpc) == (k % 2 == 1)
+        clock[0] += 0.1
+    lines = [r.getMessage() for r in caplog.records if "ILQR failed" in r.getMessage()]
+    assert lines == ["ILQR failed (rti): back to the standing warm start"]
+    mpc.solver.solution = bad
+    clock[0] = 102.5
+    WalkingMpc._healthy(mpc)  # 2.5 s after the first line: said, with the bursts between
+    lines = [r.getMessage() for r in caplog.records if "ILQR failed" in r.getMessage()]
+    assert lines[-1] == ("ILQR failed (rti): back to the standing warm start (9 more bursts "
+                         "of failures before it)")
+    assert mpc.failures == 1

@@ -39,6 +39,10 @@ log = logging.getLogger(__name__)
 # in floating point is 1e-17 s off a state stamped t + dt elsewhere, and with the default
 # max_extrapolation 0 an exact comparison ran 56 of 249 replayed go2 ticks whole
 SAME_TIME = 1e-9
+# s (wall): at most one log line per this about failed ticks (each burst of failures said
+# once, and bursts closer than this counted into the next line: every other tick failing
+# under hostile odometry logged 10 lines in 2 s)
+FAILURE_LOG_PERIOD = 2.0
 
 
 InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
@@ -131,6 +135,7 @@ class WalkingMpc:
         self._standing: dict[str, np.ndarray] = {}
         self._stance_set: np.ndarray | None = None  # the stance last given to the problem
         self.failures = 0
+        self._failure_log = (-math.inf, 0)  # (wall time of the last line, bursts not said)
         self.divergence_threshold = 1e3  # constraint violation above which a tick has failed
         # wall-clock budget of a tick's solve (s; None: none): the iterations after the first
         # are skipped when they would not end within it (real-time use; the bootstrap solve
@@ -395,7 +400,7 @@ class WalkingMpc:
 
     def _healthy(self) -> bool:
         """Whether the solver's last result is usable (finite, not diverged); counts and
-        logs (once per burst) the failures."""
+        logs the failures (once per burst, at most once per FAILURE_LOG_PERIOD)."""
         sol = self.solver.solution
         # q, v, a, f are rows of the stacked x and u
         finite = bool(sol) and bool(np.isfinite(sol["x"]).all() and np.isfinite(sol["u"]).all())
@@ -404,9 +409,16 @@ class WalkingMpc:
             self.failures = 0
             return True
         self.failures += 1
-        if self.failures == 1:
-            log.warning("ILQR failed (%s): back to the standing warm start",
-                        self.solver.stats.status)
+        if self.failures == 1:  # a new burst
+            last, unsaid = self._failure_log
+            now = time.monotonic()
+            if now - last < FAILURE_LOG_PERIOD:
+                self._failure_log = (last, unsaid + 1)
+            else:
+                log.warning("ILQR failed (%s): back to the standing warm start%s",
+                            self.solver.stats.status,
+                            f" ({unsaid} more bursts of failures before it)" if unsaid else "")
+                self._failure_log = (now, 0)
         return False
 
     # ------------------------------------------------------------------ pieces
