@@ -742,3 +742,15 @@ def test_an_exception_in_a_solve_leaves_no_earlier_success_in_the_stats(prb):
     with pytest.raises(KeyError):
         solver.solve()
     assert not solver.stats.success and solver.stats.status == "interrupted (KeyError)"
+
+
+def test_none_as_a_value_or_guess_is_refused_where_it_is_given(prb):
+    """numpy takes None as NaN: p.assign(None) and set_initial_guess(None) were stored and
+    only the solve said something was not finite (a QA finding)."""
+    p = prb.create_parameter("p", 2)
+    with pytest.raises(TypeError, match="value of 'p' is None"):
+        p.assign(None)
+    with pytest.raises(TypeError, match="initial guess of 'x' is None"):
+        prb.get_variable("x").set_initial_guess(None, nodes=2)
+    assert np.isfinite(prb.get_variable("x").initial_guess).all()
+    assert np.isfinite(p.values).all()

@@ -90,6 +90,8 @@ class Variable(cs.SX):
                what: str) -> None:
         """``target[:, cols] = value`` for the shapes :func:`broadcast_values` takes, by
         numpy's broadcasting (no intermediate array: these run every MPC tick)."""
+        if value is None:  # numpy takes it as NaN: caught only at the solve
+            raise TypeError(f"{what} of {self.name!r} is None; give a number or an array")
         arr = np.asarray(value, dtype=float)
         if arr.ndim == 1 and arr.shape[0] == self.dim:
             arr = arr[:, None]
