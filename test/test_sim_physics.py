@@ -351,3 +351,39 @@ def test_the_simulator_imports_pybullet_without_its_banner_and_keeps_stderr():
     plain = subprocess.run([sys.executable, "-c", "import pybullet"], capture_output=True,
                            text=True, timeout=120, check=True)
     assert "pybullet build time" in plain.stderr  # what the quiet import hides
+
+
+def test_the_urdf_importers_notes_on_what_the_loader_corrects_stay_off_stdout():
+    """pybullet's importer printed ~20 b3Warning lines on stdout per anymal/hyq/a1 start
+    (links without <inertial>, placeholder 1e-6 inertias: both corrected by the loader);
+    now those are dropped, anymal_c's zeroed camera inertias are named at INFO, and
+    stdout works as before afterwards."""
+    import subprocess
+    import sys
+
+    code = ("import logging, sys; logging.basicConfig(level=logging.INFO, stream=sys.stderr)\n"
+            "from horizon_mpc.sim import Simulator\n"
+            "for robot in ('anymal_b', 'a1', 'hyq', 'anymal_c'): Simulator(robot)\n"
+            "print('after')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300, check=True)
+    assert out.stdout == "after\n"
+    assert "b3Warning" not in out.stderr
+    assert ("anymal.urdf: pybullet zeroed the inertia tensors of depth_camera_front_camera, "
+            "depth_camera_rear_camera, depth_camera_left_camera, depth_camera_right_camera, "
+            "hatch") in out.stderr
+
+
+def test_a_urdf_pybullet_cannot_load_is_refused_with_what_its_parser_said(tmp_path):
+    from horizon_mpc.sim.loading import load_robot
+
+    urdf = tmp_path / "broken.urdf"
+    urdf.write_text('<robot name="r"><link name="a"/><joint name="j" type="revolute">'
+                    '<parent link="a"/><child link="nowhere"/></joint></robot>')
+    client = p.connect(p.DIRECT)
+    try:
+        with pytest.raises(ValueError, match=r"pybullet could not load the URDF .*broken.urdf "
+                                             r".*its parser said: .*does not specify limits"):
+            load_robot(client, urdf)
+    finally:
+        p.disconnect(client)

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from horizon_mpc.sim.pybullet_import import import_pybullet
+from horizon_mpc.sim.pybullet_import import c_stdout_captured, import_pybullet
 
 p = import_pybullet()  # the module, without its banner (pybullet_import.py)
 
@@ -178,6 +178,63 @@ def _links_without_inertial(urdf_text: str) -> set[str]:
     return {link.get("name") for link in root.findall("link") if link.find("inertial") is None}
 
 
+_BAD_INERTIA = "Bad inertia tensor properties, setting inertia to zero for link: "
+_NO_INERTIAL = "No inertial data for link"
+_HEADER = re.compile(r"b3\w+(\[[^\]]*\])?:")  # pybullet's message prefix
+_NEGLIGIBLE_INERTIA = 1e-5  # kg m^2: a URDF's placeholder inertia (1e-6 entries), zeroed
+
+
+def _importer_messages(text: str) -> list[str]:
+    """pybullet's importer output as messages (split at its ``b3Warning[file,line]:``
+    prefixes, which do not always start a line), repeats removed, in order."""
+    said: list[str] = []
+    for message in _HEADER.split(text):
+        message = " ".join((message or "").split())
+        if message and not message.startswith("[") and message not in said:
+            said.append(message)
+    return said
+
+
+def _largest_inertia(urdf_text: str) -> dict[str, float]:
+    """The largest ``|inertia entry|`` (kg m^2) of each link with an ``<inertia>``."""
+    out = {}
+    for link in ET.fromstring(urdf_text).findall("link"):
+        inertia = link.find("inertial/inertia")
+        if inertia is not None:
+            out[link.get("name")] = max((abs(float(v)) for v in inertia.attrib.values()),
+                                        default=0.0)
+    return out
+
+
+def _log_importer_messages(urdf: Path, said: list[str], urdf_text: str) -> None:
+    """Log what pybullet's URDF importer printed, less what is corrected here: a link
+    without ``<inertial>`` (given :data:`MASSLESS_LINK_MASS` below; the importer names it in
+    a message of its own after its note) and a placeholder inertia it zeroes (entries
+    <= 1e-5 kg m^2). Inertia tensors that are not positive definite, zeroed by pybullet
+    (anymal_c's cameras), are named at INFO; anything else is a warning."""
+    inertia = _largest_inertia(urdf_text)
+    zeroed, other = [], []
+    skip_name = False
+    for message in said:
+        if skip_name:  # the link name the note about a missing <inertial> is followed by
+            skip_name = False
+            if message not in inertia:
+                continue
+        if message.startswith(_NO_INERTIAL):
+            skip_name = True
+        elif message.startswith(_BAD_INERTIA):
+            link = message[len(_BAD_INERTIA):]
+            if inertia.get(link, 0.0) > _NEGLIGIBLE_INERTIA:
+                zeroed.append(link)
+        else:
+            other.append(message)
+    if zeroed:
+        _LOG.info("%s: pybullet zeroed the inertia tensors of %s (not positive definite in the "
+                  "URDF; Pinocchio takes them as they are)", urdf.name, ", ".join(zeroed))
+    for message in other:
+        _LOG.warning("%s: pybullet: %s", urdf.name, message)
+
+
 def load_robot(
     client: int,
     urdf: Path,
@@ -194,19 +251,26 @@ def load_robot(
             pybullet multiplies the two).
     """
     text = resolve_mesh_uris(urdf, search_dirs)
+    no_inertial = _links_without_inertial(text)
+    failed: p.error | None = None
     with tempfile.TemporaryDirectory(prefix="horizon_mpc_urdf_") as tmp:
         path = Path(tmp) / urdf.name
         path.write_text(text, encoding="utf-8")
-        try:
-            body = p.loadURDF(
-                str(path),
-                flags=p.URDF_USE_INERTIA_FROM_FILE,
-                useFixedBase=False,
-                physicsClientId=client,
-            )
-        except p.error as exc:  # pybullet says only "Cannot load URDF file."
-            raise ValueError(f"pybullet could not load the URDF {urdf} ({exc}; its own "
-                             "parser's messages, if any, are above)") from None
+        with c_stdout_captured() as importer:
+            try:
+                body = p.loadURDF(
+                    str(path),
+                    flags=p.URDF_USE_INERTIA_FROM_FILE,
+                    useFixedBase=False,
+                    physicsClientId=client,
+                )
+            except p.error as exc:  # pybullet says only "Cannot load URDF file."
+                failed = exc
+    said = _importer_messages(importer.text)
+    if failed is not None:
+        raise ValueError(f"pybullet could not load the URDF {urdf} ({failed})"
+                         + (f"; its parser said: {' | '.join(said)}" if said else ""))
+    _log_importer_messages(urdf, said, text)
     if body < 0:
         raise RuntimeError(f"pybullet could not load the URDF {urdf}")
     root_link = p.getBodyInfo(body, physicsClientId=client)[0].decode()
@@ -221,7 +285,7 @@ def load_robot(
         fixed_joint[j] = info[2] == p.JOINT_FIXED
         if not fixed_joint[j]:
             joint_index[info[1].decode()] = j
-    massless = sorted(_links_without_inertial(text) & set(link_index))
+    massless = sorted(no_inertial & set(link_index))
     for name in massless:
         p.changeDynamics(
             body,
