@@ -24,6 +24,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -95,9 +96,10 @@ def find_config_file(name_or_path: str | Path, what: str = "robot config",
             available names).
     """
     p = Path(name_or_path)
-    # a path: a .yaml/.yml name, a name with a folder, or a Path (a bare name is a config's,
-    # whatever the working directory holds)
-    if p.suffix in (".yaml", ".yml") or len(p.parts) > 1 or isinstance(name_or_path, Path):
+    # a path: a .yaml/.yml name, a name with a folder (./name too: pathlib drops the '.'),
+    # or a Path (a bare name is a config's, whatever the working directory holds)
+    if (p.suffix in (".yaml", ".yml") or len(p.parts) > 1 or isinstance(name_or_path, Path)
+            or "/" in str(name_or_path) or os.sep in str(name_or_path)):
         if p.is_dir():
             raise FileNotFoundError(f"{what} {str(p)!r} is a folder, not a YAML file")
         if not p.is_file():
@@ -109,16 +111,35 @@ def find_config_file(name_or_path: str | Path, what: str = "robot config",
         if candidate.is_file():
             return candidate
     available = sorted({c.stem for d in dirs if d.is_dir() for c in d.glob("*.yaml")})
+    here = (f"; the file {str(name_or_path)!r} in the working folder is no {what} name: give "
+            f"it as ./{name_or_path}") if p.is_file() else ""
     raise FileNotFoundError(f"no {what} {str(name_or_path)!r}; available: "
-                            f"{', '.join(available) or 'none'}")
+                            f"{', '.join(available) or 'none'}{here}")
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """YAML's safe loader refusing a key given twice in one mapping (PyYAML keeps the last
+    silently: a profile with two ``segments:`` lost the first)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if isinstance(key, list | dict):
+                continue  # unhashable: the base class says so
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} given twice in one mapping", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
 
 
 def read_yaml(path: str | Path) -> Any:
     """The data of the YAML file at ``path``; ``ValueError`` naming the file when it is not
-    text (UTF-8) or not valid YAML."""
+    text (UTF-8) or not valid YAML (a key given twice in a mapping included)."""
     with open(path, encoding="utf-8") as fh:
         try:
-            return yaml.safe_load(fh)
+            return yaml.load(fh, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
         except yaml.YAMLError as exc:
             raise ValueError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
         except UnicodeDecodeError as exc:

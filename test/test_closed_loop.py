@@ -816,3 +816,25 @@ def test_the_usage_names_the_program_the_way_it_was_run(monkeypatch, capsys, arg
         main(["--help"])
     assert exit_.value.code == 0
     assert capsys.readouterr().out.startswith(f"usage: {prog} [-h]")
+
+
+def test_a_profile_in_the_working_folder_is_found_by_its_relative_path(tmp_path, monkeypatch):
+    """`--profile ./std.txt` was looked up as a profile name (pathlib drops './'): 'no
+    command profile'; a bare file name says how to give it (QA finding)."""
+    (tmp_path / "std.txt").write_text("segments:\n  - {duration: 2, vx: 0.3}\n")
+    monkeypatch.chdir(tmp_path)
+    assert [s.duration for s in load_profile("./std.txt")] == [2.0]
+    with pytest.raises(FileNotFoundError, match=r"give it as \./std\.txt"):
+        load_profile("std.txt")
+
+
+def test_a_key_given_twice_in_a_profile_is_refused(tmp_path):
+    """PyYAML keeps the last: two `segments:` blocks ran the second only, and
+    {vx: 0.3, vx: 0.0} as vx 0, exit 0 (QA finding)."""
+    for text in ("segments:\n  - {duration: 2, vx: 0.3}\nsegments:\n  - {duration: 1}\n",
+                 "segments:\n  - {duration: 2, vx: 0.3, vx: 0.0}\n"):
+        path = tmp_path / "dup.yaml"
+        path.write_text(text)
+        with pytest.raises(ValueError, match=r"dup.yaml: not valid YAML \(key '(segments|vx)' "
+                                             r"given twice"):
+            load_profile(path)
