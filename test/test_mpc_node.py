@@ -1576,9 +1576,18 @@ def test_gait_settings_and_weights_outside_where_the_trot_walked_are_warned_abou
     """Accepted values that made the go2 fall (step_duration 0.8 s or more, duty factor 0.1,
     weights at 2e4x their defaults and more) were set without a word."""
     from horizon_mpc.locomotion.settings import Weights
-    from horizon_mpc.nodes.mpc_parameters import gait_warnings, weight_warnings
+    from horizon_mpc.nodes.mpc_parameters import gait_warnings, limit_warnings, weight_warnings
 
-    assert gait_warnings("trot", 0.3, None) == gait_warnings("walk", 0.7, 0.15) == []
+    assert gait_warnings("trot", 0.3, None) == gait_warnings("walk", 0.7, 0.3) == []
+    # relative to the robot's own step and below the duty factor another robot fell with
+    # (solo12: 0.6 s for its 0.2 fell, as 0.2 duty factor did; session 26 audit)
+    assert gait_warnings("trot", 0.4, None, config_step=0.2) == []
+    assert any("step_duration 0.6 s is 3x the robot config's 0.2 s" in w
+               for w in gait_warnings("trot", 0.6, None, config_step=0.2))
+    assert any("duty_factor 0.2 is below 0.25" in w for w in gait_warnings("trot", 0.3, 0.2))
+    assert limit_warnings([0.6, 0.5, 0.8], [0.6, 0.5, 0.8]) == []
+    fast = limit_warnings([1.0, 0.5, 0.8], [0.6, 0.5, 0.8])
+    assert len(fast) == 1 and fast[0].startswith("max_vx 1 m/s is above the robot config's 0.6")
     assert any("step_duration 0.8 s is outside 0.15-0.7 s" in w
                for w in gait_warnings("trot", 0.8, None))
     assert any("duty_factor 0.1 is outside" in w for w in gait_warnings("trot", 0.3, 0.1))
@@ -1598,6 +1607,8 @@ def test_gait_settings_and_weights_outside_where_the_trot_walked_are_warned_abou
     warned.clear()
     assert h.node.set_parameters([Parameter("max_vx", value=0.4)])[0].successful
     assert warned == []  # a weight set before is not warned about again
+    assert h.node.set_parameters([Parameter("max_vx", value=1.0)])[0].successful
+    assert len(warned) == 1 and warned[0].startswith("max_vx 1 m/s is above")
 
 
 def test_a_control_rate_faster_than_the_nodes_sets_dt_and_the_nodes():

@@ -56,6 +56,7 @@ from horizon_mpc.nodes.mpc_parameters import (
     MpcParameters,
     gait_duty_factor,
     gait_warnings,
+    limit_warnings,
     parameter_table,
     timing_warnings,
     weight_warnings,
@@ -184,6 +185,8 @@ class MpcNode(MpcParameters, Node):
         """Declare the parameters (defaults from ``cfg``'s ``mpc:`` section, or the given
         controller's settings) and return the settings they choose, warning about values
         outside where the robot was seen to walk."""
+        # the config's own: what the gait and limits were tuned with (warnings)
+        self._config_settings = MpcSettings.from_dict(cfg.section("mpc"))
         settings = (mpc.settings if mpc is not None
                     else MpcSettings.from_dict(cfg.section("mpc")))
         self._declare_parameters(settings, rate_sets_horizon=mpc is None)
@@ -220,7 +223,9 @@ class MpcNode(MpcParameters, Node):
         settings.feedback_tolerance = float(self._p("feedback_tolerance"))
         settings.weights = self._weights_from_parameters(settings.weights)
 
-        for note in (*gait_warnings(g.name, g.step_duration, g.duty_factor),
+        for note in (*gait_warnings(g.name, g.step_duration, g.duty_factor,
+                                    self._config_settings.gait.step_duration),
+                     *limit_warnings(settings.max_velocity, self._config_settings.max_velocity),
                      *weight_warnings(settings.weights)):
             self.get_logger().warning(note)
         for note in timing_warnings(settings.dt, settings.n_nodes,

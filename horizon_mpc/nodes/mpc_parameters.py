@@ -27,7 +27,7 @@ from horizon_mpc.nodes.declare import declare, float_range, int_range, parameter
 __all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MIN_DUTY_FACTOR",
            "MODEL_PARAMETERS", "MODEL_PARAMETER_DECLARATIONS", "WEIGHT_FIELDS", "MpcParameters",
            "gait_duty_factor", "gait_warnings", "parameter_names", "parameter_table",
-           "horizon_for_rate", "timing_warnings", "weight_warnings"]
+           "horizon_for_rate", "limit_warnings", "timing_warnings", "weight_warnings"]
 
 WEIGHT_FIELDS = [f.name for f in dataclasses.fields(Weights)]
 LIVE_GAIT = ("gait", "step_duration", "step_height", "duty_factor")
@@ -63,6 +63,11 @@ WALKED_MAX_NODES_PER_TICK = 5  # 10 Hz at dt 0.02 walked; 5 Hz (10 nodes a tick)
 # base_orientation at 1e6x and more
 WALKED_STEP_DURATION = (0.15, 0.7)
 WALKED_DUTY_FACTOR = (0.15, 0.9)
+# other robots, default profile, lockstep (session 26 audit): a step of 2x their config's
+# walked (solo12 0.4 s for its 0.2), longer ones fell (solo12 0.6 and 0.7 s, anymal_c 0.7
+# s for its 0.3); solo12 fell with duty factor 0.2
+WALKED_STEP_RATIO = 2.0
+WALKED_MIN_DUTY_FACTOR_ALL = 0.25
 WALKED_WEIGHT_RATIO = 1000.0
 
 
@@ -78,10 +83,11 @@ def gait_duty_factor(value: float) -> float | None:
 
 
 def gait_warnings(gait: str, step_duration: float | None = None,
-                  duty_factor: float | None = None) -> list[str]:
+                  duty_factor: float | None = None,
+                  config_step: float | None = None) -> list[str]:
     """What is known to go wrong with ``gait`` and, when given, its step duration (s) and
-    duty factor (None or 0: the gait's own) outside where the trot walked (empty when
-    nothing is)."""
+    duty factor (None or 0: the gait's own) outside where the trot walked, also relative to
+    ``config_step``, the robot config's own step duration (empty when nothing is)."""
     out = []
     if gait in EXPERIMENTAL_GAITS:
         out.append(f"gait {gait!r} is experimental: it does not walk in the lockstep closed "
@@ -92,10 +98,34 @@ def gait_warnings(gait: str, step_duration: float | None = None,
     if step_duration is not None and not lo <= step_duration <= hi:
         out.append(f"step_duration {step_duration:g} s is outside {lo:g}-{hi:g} s, where the "
                    "go2 trot walked (0.1 and 0.8 s fell in the lockstep loop)")
+    elif step_duration is not None and config_step and not (
+            config_step / WALKED_STEP_RATIO <= step_duration
+            <= WALKED_STEP_RATIO * config_step + 1e-12):
+        out.append(f"step_duration {step_duration:g} s is {step_duration / config_step:.3g}x the "
+                   f"robot config's {config_step:g} s: robots walked within "
+                   f"{1 / WALKED_STEP_RATIO:g}-{WALKED_STEP_RATIO:g}x theirs (solo12 fell at 3x, "
+                   "anymal_c at 2.3x in the lockstep loop)")
     lo, hi = WALKED_DUTY_FACTOR
     if duty_factor and not lo <= duty_factor <= hi:
         out.append(f"duty_factor {duty_factor:g} is outside {lo:g}-{hi:g}, where the go2 trot "
                    "walked (0.1 fell in the lockstep loop)")
+    elif duty_factor and duty_factor < WALKED_MIN_DUTY_FACTOR_ALL:
+        out.append(f"duty_factor {duty_factor:g} is below {WALKED_MIN_DUTY_FACTOR_ALL:g}: the "
+                   "go2 trot walked down to 0.15, solo12 fell at 0.2 in the lockstep loop")
+    return out
+
+
+def limit_warnings(limits: list[float], config_limits: list[float]) -> list[str]:
+    """The command limits (max_vx, max_vy, max_wz) above the robot config's
+    (``mpc.max_velocity``), the speeds its gait was tuned and seen to walk at (empty when
+    none is): go2 fell at 0.7 m/s forward (its config: 0.6) and at 1.0 with no warning."""
+    out = []
+    for name, value, nominal, unit in zip(LIVE_LIMITS, limits, config_limits,
+                                          ("m/s", "m/s", "rad/s"), strict=True):
+        if value > nominal + 1e-9:
+            out.append(f"{name} {value:g} {unit} is above the robot config's {nominal:g} "
+                       "(mpc.max_velocity, where its gait was seen to walk): go2 fell at 0.7 "
+                       "m/s forward in the lockstep loop (doc/locomotion.md)")
     return out
 
 
@@ -323,7 +353,11 @@ class MpcParameters:
             self.get_logger().info(f"parameters updated live: {sorted(new)}")
         if any(n in new for n in LIVE_GAIT):
             g = st.gait
-            for note in gait_warnings(g.name, g.step_duration, g.duty_factor):
+            for note in gait_warnings(g.name, g.step_duration, g.duty_factor,
+                                      self._config_settings.gait.step_duration):
+                self.get_logger().warning(note)
+        if any(n in new for n in LIVE_LIMITS):
+            for note in limit_warnings(st.max_velocity, self._config_settings.max_velocity):
                 self.get_logger().warning(note)
         changed = [n[2:] for n in new if n.startswith("w_")]
         if changed:
