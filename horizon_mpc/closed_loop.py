@@ -45,6 +45,7 @@ from horizon_mpc.closed_loop_profile import (
     command_at,
     load_profile,
     load_pushes,
+    unreached_segments,
 )
 from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen, render_replay
 from horizon_mpc.config import RobotConfig, load_robot_config
@@ -179,6 +180,14 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         log.warning("segment(s) %s last less than the control period (%g s): their commands "
                     "may never reach the MPC (the profile is sampled once per period)",
                     short, period)
+    limits = MpcSettings.from_dict(cfg.section("mpc"))
+    unreached = unreached_segments(segments, limits.max_velocity, limits.max_acceleration)
+    if unreached:
+        log.warning("segment(s) %s end before the command's ramp (%s s at the config's "
+                    "max_acceleration %s) reaches them: the robot follows the ramped command, "
+                    "which need not average as the profile does (a +-0.4 m/s flip every 0.5 s "
+                    "drove go2 0.97 m forward)", [i for i, _ in unreached],
+                    ", ".join(f"{r:.2g}" for _, r in unreached), limits.max_acceleration)
     loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
     domain_id = run_domain_id(mode, domain_id)
     try:

@@ -15,7 +15,7 @@ from horizon_mpc.nodes.mpc_inputs import ABSURD_COMMAND
 from horizon_mpc.sim.simulator import PLAUSIBLE_WRENCH
 
 __all__ = ["DEFAULT_PROFILE", "MAX_COMMAND", "MAX_PUSH", "Push", "Segment", "command_at",
-           "load_profile", "load_pushes", "profile_file"]
+           "load_profile", "load_pushes", "profile_file", "unreached_segments"]
 
 DEFAULT_PROFILE = "default"  # config/commands/default.yaml (installed under share/horizon_mpc)
 
@@ -163,3 +163,24 @@ def command_at(segments: Sequence[Segment], t: float) -> np.ndarray:
         if t < end - 1e-9:
             return np.array([seg.vx, seg.vy, seg.wz])
     return np.zeros(3)
+
+
+def unreached_segments(segments: Sequence[Segment], max_velocity: Sequence[float],
+                       max_acceleration: Sequence[float]) -> list[tuple[int, float]]:
+    """The segments (index, ramp time in s) whose command the MPC's ramp (each axis at most
+    ``max_acceleration``, commands clipped to ``max_velocity``) cannot reach from the one
+    before within the segment; the last segment is left out (it is held to the end).
+
+    The robot follows the ramped command, not the profile's: go2 under +-0.4 m/s flipped
+    every 0.5 s (1 m/s^2 needs 0.8 s for a flip) ran a command between -0.1 and +0.4 and
+    ended 0.97 m ahead of a profile that averages zero (session 26 audit)."""
+    vmax, amax = np.asarray(max_velocity, float), np.asarray(max_acceleration, float)
+    out = []
+    before = np.zeros(3)
+    for i, seg in enumerate(segments):
+        cmd = np.clip([seg.vx, seg.vy, seg.wz], -vmax, vmax)
+        ramp = float(np.max(np.abs(cmd - before) / amax))
+        if i < len(segments) - 1 and ramp > seg.duration + 1e-9:
+            out.append((i, ramp))
+        before = cmd
+    return out

@@ -838,3 +838,21 @@ def test_a_key_given_twice_in_a_profile_is_refused(tmp_path):
         with pytest.raises(ValueError, match=r"dup.yaml: not valid YAML \(key '(segments|vx)' "
                                              r"given twice"):
             load_profile(path)
+
+
+def test_segments_the_commands_ramp_cannot_reach_are_found():
+    """+-0.4 m/s flipped every 0.5 s ran a ramped command between -0.1 and +0.4 (1 m/s^2
+    needs 0.8 s per flip): go2 ended 0.97 m ahead of a profile averaging zero, with no word
+    (QA finding). The closed loop warns about such segments."""
+    from horizon_mpc.closed_loop_profile import unreached_segments
+
+    flips = [Segment(1.0)] + [Segment(0.5, vx=0.4 * (-1) ** k) for k in range(12)] + [
+        Segment(4.0)]
+    found = unreached_segments(flips, [0.6, 0.5, 0.8], [1.0, 1.0, 2.0])
+    assert [i for i, _ in found] == list(range(2, 13))  # the first one only rises 0.4
+    assert found[0][1] == pytest.approx(0.8)
+    # commands are clipped to the limits first; the default profile is reachable
+    assert unreached_segments([Segment(0.3, vx=5.0), Segment(1.0)], [0.2, 0.5, 0.8],
+                              [1.0, 1.0, 2.0]) == []
+    assert unreached_segments(load_profile(DEFAULT_PROFILE), [0.6, 0.5, 0.8],
+                              [1.0, 1.0, 2.0]) == []
