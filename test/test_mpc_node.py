@@ -455,6 +455,38 @@ def test_diagnostics_warn_on_solver_failures_not_on_real_time_iterations(context
     node.destroy_node()
 
 
+def test_diagnostics_say_error_when_the_measured_base_is_a_fallen_robots(context,
+                                                                          walking_mpc):
+    """The status said OK while the robot lay on the ground in some falls (the violation of
+    its plans stayed small): a base below 0.6 of its nominal height or tilted more than 0.5
+    rad (the closed loop's fall test) is ERROR, with a warning."""
+    node = sim_time_node(context, walking_mpc, diagnostics_rate=0.0)
+    warned: list[str] = []
+    node._warn = lambda kind, text: warned.append(text)
+    try:
+        drive_in_sim_time(node, 3)
+        assert node._pub_diag.msgs[-1].status[0].level == DiagnosticStatus.OK
+        ground = float(np.mean(node.mpc.ground_z))
+        nominal = float(node.mpc.wp.height_ref.values[0, 0]) - ground
+        for base, what in ((ground + 0.5 * nominal, "above the ground"),
+                           (ground + nominal, "tilted 0.60 rad")):
+            plan = copy.copy(node.plan)
+            plan.q = plan.q.copy()
+            plan.q[2, 0] = base
+            if what.startswith("tilted"):  # rolled 0.6 rad
+                plan.q[3:7, 0] = [np.sin(0.3), 0.0, 0.0, np.cos(0.3)]
+            node._publish_diagnostics(plan, 11 * NS_PER_S)
+            status = node._pub_diag.msgs[-1].status[0]
+            assert status.level == DiagnosticStatus.ERROR, what
+            assert status.message.startswith("the robot seems to have fallen") and \
+                what in status.message
+            assert warned[-1] == status.message
+        node._publish_diagnostics(node.plan, 12 * NS_PER_S)  # standing again
+        assert node._pub_diag.msgs[-1].status[0].level == DiagnosticStatus.OK
+    finally:
+        node.destroy_node()
+
+
 def test_diagnostics_rate_0_sends_a_status_every_tick(context, walking_mpc):
     node = sim_time_node(context, walking_mpc, diagnostics_rate=0.0)
     out = drive_in_sim_time(node, 4)

@@ -77,6 +77,11 @@ INFEASIBLE_PLAN = 0.3
 #: s of node clock the violation must stay beyond INFEASIBLE_PLAN before it is WARN: a
 #: falling robot's plans stay there; at 100 Hz single ticks of a walking go2 reached 81-140
 INFEASIBLE_FOR = 0.1
+#: a measured base this low (fraction of its nominal height above the ground) or this tilted
+#: (rad) is a fallen robot (ERROR diagnostics; the closed loop's fall test): the status
+#: said OK while go2 lay on its side in some falls, the violation of its plans being small
+FALLEN_HEIGHT = 0.6
+FALLEN_TILT = 0.5
 MISS_WARN_SHARE = 0.2  # prepare misses among the recent ticks beyond which the node warns
 _RECENT_STATES = 8  # joint_states / odom messages kept to pair them by stamp
 
@@ -745,6 +750,10 @@ class MpcNode(MpcParameters, Node):
                 level = DiagnosticStatus.WARN
                 message = (f"prepare misses in {self._misses_text()}: whole ticks, no "
                            "state within feedback_tolerance of the tick times")
+            fallen = self._fallen(plan.q[:7, 0])
+            if fallen:
+                level, message = DiagnosticStatus.ERROR, fallen
+                self._warn("fallen", fallen)
             self._solve_time_max = max(self._solve_time_max, self.last_solve_time)
         now_ns = self.get_clock().now().nanoseconds if now_ns is None else now_ns
         last = self._last_diag  # a rising level (OK -> WARN) goes out at once
@@ -773,6 +782,20 @@ class MpcNode(MpcParameters, Node):
         }
         self._solve_time_max = 0.0
         self._pub_diag.publish(self._diag.filled(stamp_ns, level, message, values))
+
+
+    def _fallen(self, base: np.ndarray) -> str:
+        """Why the measured base pose ``base`` (x, y, z, quaternion x, y, z, w; a plan's
+        node 0) is a fallen robot's (below FALLEN_HEIGHT of its nominal height above the
+        ground, or tilted more than FALLEN_TILT), or '' if it is not."""
+        _, _, z, qx, qy = base[:5].tolist()
+        ground = float(np.mean(self.mpc.ground_z))
+        nominal = float(self.mpc.wp.height_ref.values[0, 0]) - ground
+        tilt = math.acos(min(1.0, max(-1.0, 1.0 - 2.0 * (qx * qx + qy * qy))))
+        if tilt > FALLEN_TILT or z - ground < FALLEN_HEIGHT * nominal:
+            return (f"the robot seems to have fallen: base {z - ground:.3f} m above the ground "
+                    f"(nominal {nominal:.3f} m), tilted {tilt:.2f} rad")
+        return ""
 
 
 def _unset_hint(joints_ns: int, base_ns: int) -> str:
