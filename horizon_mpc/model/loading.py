@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import os
 import sys
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 import pinocchio as pin
+
+from horizon_mpc.c_output import Captured, c_output_captured
 
 __all__ = ["load_pin_model"]
 
@@ -65,24 +65,14 @@ def _stderr_captured() -> Iterator[list[str]]:
     """What C code writes to file descriptor 2 inside the block, as lines in the yielded
     list once the block has ended; it is also passed on to stderr (nothing is lost)."""
     lines: list[str] = []
+    out = Captured()
     try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError):  # no usable fd 2 (embedded interpreters): no capture
-        yield lines
-        return
-    with tempfile.TemporaryFile() as tmp:
-        os.dup2(tmp.fileno(), 2)
-        try:
+        with c_output_captured(2) as out:
             yield lines
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            tmp.seek(0)
-            text = tmp.read().decode("utf-8", errors="replace")
-            if text:
-                sys.stderr.write(text)
-            lines.extend(text.splitlines())
+    finally:
+        if out.text:
+            sys.stderr.write(out.text)
+        lines.extend(out.text.splitlines())
 
 
 def _check_root(model: pin.Model, floating_base: bool, source: str) -> None:

@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from horizon_mpc.sim.pybullet_import import c_stdout_captured, import_pybullet
+from horizon_mpc.c_output import c_output_captured
+from horizon_mpc.sim.pybullet_import import import_pybullet
 
 p = import_pybullet()  # the module, without its banner (pybullet_import.py)
 
@@ -256,7 +257,7 @@ def load_robot(
     with tempfile.TemporaryDirectory(prefix="horizon_mpc_urdf_") as tmp:
         path = Path(tmp) / urdf.name
         path.write_text(text, encoding="utf-8")
-        with c_stdout_captured() as importer:
+        with c_output_captured(1) as importer:  # pybullet's importer prints on stdout
             try:
                 body = p.loadURDF(
                     str(path),
