@@ -202,3 +202,15 @@ def test_every_frame_gets_a_validly_named_function(name):
     m = model(name)
     for frame in m.frame_names:
         assert m.fk(frame).name().startswith("fk_")
+
+
+def test_a_pinocchio_model_with_armature_is_refused_by_name():
+    """Pinocchio's crba/rnea/aba add the armature (rotor inertia), the symbolic dynamics
+    did not: M off by the armature, forward dynamics by 119 rad/s^2 on a panda, silently
+    (a QA finding). Refused, naming the joints."""
+    model = pin.buildSampleModelManipulator()
+    model.armature[2] = 0.1
+    with pytest.raises(ValueError, match=r"armature is not zero \(joints \['shoulder3_joint'\]\)"):
+        RobotModel(model)
+    model.armature[:] = 0.0
+    assert RobotModel(model).nv == model.nv

@@ -78,6 +78,15 @@ class RobotModel(SymbolicFunctions):
     def __init__(
         self, pin_model: pin.Model, name: str | None = None, srdf: str | Path | None = None
     ) -> None:
+        armature = np.asarray(pin_model.armature, dtype=float)
+        if np.any(armature != 0.0):
+            # Pinocchio's crba/rnea/aba add it; the symbolic dynamics here do not
+            joints = [pin_model.names[j] for j in range(1, pin_model.njoints)
+                      if np.any(armature[pin_model.idx_vs[j]:pin_model.idx_vs[j]
+                                         + pin_model.nvs[j]] != 0.0)]
+            raise ValueError(f"pin_model.armature is not zero (joints {joints}): rotor "
+                             "inertia is not modelled by RobotModel's dynamics; set "
+                             "pin_model.armature[:] = 0 or add it to your model's terms")
         self.pin_model = pin_model
         self.name = name or pin_model.name
         self._specs = joint_specs(pin_model)
