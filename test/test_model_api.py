@@ -214,3 +214,10 @@ def test_a_pinocchio_model_with_armature_is_refused_by_name():
         RobotModel(model)
     model.armature[:] = 0.0
     assert RobotModel(model).nv == model.nv
+
+
+def test_an_empty_urdf_string_is_named_as_such():
+    """It was looked up as the path '.': 'URDF file not found: .'."""
+    for empty in ("", "  \n"):
+        with pytest.raises(ValueError, match="no URDF: an empty string"):
+            RobotModel.from_urdf(empty)

@@ -30,8 +30,10 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
 
     Raises:
         FileNotFoundError: the path does not exist.
-        ValueError: the URDF is malformed (Pinocchio's message is included).
+        ValueError: the URDF is malformed (Pinocchio's message is included), or empty.
     """
+    if isinstance(urdf, str) and not urdf.strip():
+        raise ValueError("no URDF: an empty string is neither a file path nor URDF text")
     is_xml = isinstance(urdf, str) and _looks_like_xml(urdf)
     if not is_xml:
         path = Path(urdf).expanduser()
