@@ -387,3 +387,18 @@ def test_a_urdf_pybullet_cannot_load_is_refused_with_what_its_parser_said(tmp_pa
             load_robot(client, urdf)
     finally:
         p.disconnect(client)
+
+
+def test_a_simulator_leaves_no_folder_behind(tmp_path, monkeypatch):
+    """Each simulator left a /tmp/horizon_mpc_sim_* folder with its ground texture (377 on
+    an auditor's host); the texture is loaded from a folder removed right after."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    sim = Simulator("go2")
+    try:
+        assert not list(tmp_path.glob("horizon_mpc_sim_*"))
+        assert sim.render(width=32, height=24).shape[:2] == (24, 32)  # the texture is loaded
+    finally:
+        sim.close()
+    assert not list(tmp_path.iterdir())

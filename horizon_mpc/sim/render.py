@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -18,8 +17,9 @@ __all__ = ["checker_texture", "render_following", "write_gif"]
 
 
 @functools.cache
-def checker_texture(squares: int = 200, pixels: int = 4) -> Path:
-    """A grey checkerboard PNG (``squares`` x ``squares``), written once per process.
+def checker_texture(folder: Path, squares: int = 200, pixels: int = 4) -> Path:
+    """A grey checkerboard PNG (``squares`` x ``squares``) written into ``folder``; returns
+    its path (the caller removes it once loaded: a folder left per simulator filled /tmp).
 
     Stretched over the ground's visual (100 m wide) it gives 0.5 m squares, so that motion
     is visible in rendered frames.
@@ -29,7 +29,7 @@ def checker_texture(squares: int = 200, pixels: int = 4) -> Path:
     board = (np.indices((squares, squares)).sum(axis=0) % 2).astype(np.uint8) * 40 + 150
     board = np.kron(board, np.ones((pixels, pixels), dtype=np.uint8))
     rgb = np.stack([board, board + 10, board], axis=-1)
-    path = Path(tempfile.mkdtemp(prefix="horizon_mpc_sim_")) / "checker.png"
+    path = Path(folder) / "checker.png"
     Image.fromarray(rgb).save(path)
     return path
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -205,7 +206,8 @@ class Simulator:
                                   visualFramePosition=[0.0, 0.0, -0.005],
                                   rgbaColor=[0.55, 0.6, 0.55, 1.0], physicsClientId=self.client)
         ground = p.createMultiBody(0.0, col, vis, physicsClientId=self.client)
-        texture = p.loadTexture(str(checker_texture()), physicsClientId=self.client)
+        with tempfile.TemporaryDirectory(prefix="horizon_mpc_sim_") as tmp:
+            texture = p.loadTexture(str(checker_texture(Path(tmp))), physicsClientId=self.client)
         p.changeVisualShape(ground, -1, textureUniqueId=texture, rgbaColor=[1, 1, 1, 1],
                             physicsClientId=self.client)
         # pybullet multiplies the two bodies' coefficients: the robot's links carry `friction`.
