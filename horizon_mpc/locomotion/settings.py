@@ -107,8 +107,10 @@ class MpcSettings:
     stand_when_idle: bool = True
     # m (and rad): a measured base pose this far from the plan's (beyond 2 m/s and 3 rad/s
     # of motion since the last tick) is a reset or a glitch of the state estimate, not
-    # motion: the controller restarts from it rather than chase the old pose
-    pose_jump: float = 0.3
+    # motion: the controller restarts from it rather than chase the old pose (0.3 until
+    # session 26: a reset 0.13-0.27 m from the start pose was walked again; pushes of 30 %
+    # of the weight move the base by millimetres a tick)
+    pose_jump: float = 0.1
     rho_init: float = 100.0
     # inequality rows (friction cones, torque and joint limits) in the ILQR: 'barrier' (a
     # relaxed log barrier, smooth: one iteration per tick walks every command of the lockstep
