@@ -32,4 +32,11 @@ def __getattr__(name: str) -> object:
     if name == "make_solver":
         from horizon_mpc.solvers import make_solver
         return make_solver
+    if not name.startswith("_"):  # a subpackage, as `import horizon_mpc` used to load some
+        import importlib
+        try:
+            return importlib.import_module(f"horizon_mpc.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"horizon_mpc.{name}":
+                raise
     raise AttributeError(f"module 'horizon_mpc' has no attribute {name!r}")

@@ -126,6 +126,20 @@ def test_importing_the_library_does_not_import_rclpy(import_report):
     assert culprit is None, f"rclpy was imported while importing {culprit}"
 
 
+def test_the_package_imports_its_api_on_first_use():
+    """`import horizon_mpc` alone no longer imports CasADi (a node's entry point takes the
+    signals first); its API and subpackages are there as before."""
+    code = ("import sys, horizon_mpc as h\n"
+            "assert 'casadi' not in sys.modules\n"
+            "assert h.Problem.__name__ == 'Problem' and callable(h.make_solver)\n"
+            "assert h.solvers.make_solver is h.make_solver and h.problem.Problem is h.Problem\n"
+            "assert 'rclpy' not in sys.modules\n"
+            "try:\n    h.no_such_thing\nexcept AttributeError:\n    print('ok')\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0 and proc.stdout == "ok\n", proc.stderr
+
+
 # --------------------------------------------------------------------------------------------
 # Executables: one dict in setup.py, one launcher file each
 
