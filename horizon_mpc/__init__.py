@@ -23,17 +23,18 @@ __version__ = "0.1.0"
 __all__ = ["Problem", "__version__", "make_solver"]
 
 
+_API = {"Problem": "horizon_mpc.problem", "make_solver": "horizon_mpc.solvers"}
+
+
 def __getattr__(name: str) -> object:
-    # the API on first use: importing the package alone (a node's entry point, which takes
-    # the signals first: horizon_mpc.nodes.launcher) does not import CasADi and numpy
-    if name == "Problem":
-        from horizon_mpc.problem import Problem
-        return Problem
-    if name == "make_solver":
-        from horizon_mpc.solvers import make_solver
-        return make_solver
-    if not name.startswith("_"):  # a subpackage, as `import horizon_mpc` used to load some
-        import importlib
+    # the API and subpackages on first use: importing the package alone (a node's entry
+    # point, which takes the signals first: horizon_mpc.nodes.launcher) does not import
+    # CasADi and numpy
+    import importlib
+
+    if name in _API:
+        return getattr(importlib.import_module(_API[name]), name)
+    if not name.startswith("_"):
         try:
             return importlib.import_module(f"horizon_mpc.{name}")
         except ModuleNotFoundError as exc:

@@ -132,6 +132,9 @@ class WalkingMpc:
         self.pose_ref = np.zeros(3)  # x, y, yaw
         self.t_last: float | None = None
         self.ground_z = np.zeros(len(self.wp.feet))
+        # m: the ground (the feet's mean height at start) and the base height reference above it
+        self.ground_height = 0.0
+        self.base_height_above_ground = float(self.wp.base_height)
         self._standing: dict[str, np.ndarray] = {}
         self._stance_set: np.ndarray | None = None  # the stance last given to the problem
         self.failures = 0
@@ -171,7 +174,9 @@ class WalkingMpc:
         self.ground_z = np.array([float(fn(q)[0][2]) for fn in fk])
         # feet frames may sit above the ground (foot radius): keep the height above them
         lowest_nominal = min(float(fn(wp.q_nominal)[0][2]) for fn in fk)
-        wp.height_ref.assign(wp.base_height - lowest_nominal + float(np.mean(self.ground_z)))
+        self.ground_height = float(np.mean(self.ground_z))
+        self.base_height_above_ground = wp.base_height - lowest_nominal
+        wp.height_ref.assign(self.base_height_above_ground + self.ground_height)
         self.pose_ref = np.array([q[0], q[1], base_yaw(q)])
         self.cmd[:] = 0.0
         self.scheduler.reset(t)

@@ -10,6 +10,7 @@ mode needs; ``trigger: timer`` ticks at ``control_rate`` on the node's clock.
 
 from __future__ import annotations
 
+import copy
 import functools
 import gc
 import math
@@ -192,8 +193,7 @@ class MpcNode(MpcParameters, Node):
         outside where the robot was seen to walk."""
         # the config's own: what the gait and limits were tuned with (warnings)
         self._config_settings = MpcSettings.from_dict(cfg.section("mpc"))
-        settings = (mpc.settings if mpc is not None
-                    else MpcSettings.from_dict(cfg.section("mpc")))
+        settings = mpc.settings if mpc is not None else copy.deepcopy(self._config_settings)
         self._declare_parameters(settings, rate_sets_horizon=mpc is None)
         horizon = (int(self._p("n_nodes")), float(self._p("dt")))
         if mpc is not None and horizon != (settings.n_nodes, settings.dt):
@@ -783,17 +783,16 @@ class MpcNode(MpcParameters, Node):
         self._solve_time_max = 0.0
         self._pub_diag.publish(self._diag.filled(stamp_ns, level, message, values))
 
-
     def _fallen(self, base: np.ndarray) -> str:
         """Why the measured base pose ``base`` (x, y, z, quaternion x, y, z, w; a plan's
         node 0) is a fallen robot's (below FALLEN_HEIGHT of its nominal height above the
         ground, or tilted more than FALLEN_TILT), or '' if it is not."""
         _, _, z, qx, qy = base[:5].tolist()
-        ground = float(np.mean(self.mpc.ground_z))
-        nominal = float(self.mpc.wp.height_ref.values[0, 0]) - ground
-        tilt = math.acos(min(1.0, max(-1.0, 1.0 - 2.0 * (qx * qx + qy * qy))))
-        if tilt > FALLEN_TILT or z - ground < FALLEN_HEIGHT * nominal:
-            return (f"the robot seems to have fallen: base {z - ground:.3f} m above the ground "
+        height, nominal = z - self.mpc.ground_height, self.mpc.base_height_above_ground
+        cos_tilt = 1.0 - 2.0 * (qx * qx + qy * qy)
+        if cos_tilt < math.cos(FALLEN_TILT) or height < FALLEN_HEIGHT * nominal:
+            tilt = math.acos(max(-1.0, min(1.0, cos_tilt)))
+            return (f"the robot seems to have fallen: base {height:.3f} m above the ground "
                     f"(nominal {nominal:.3f} m), tilted {tilt:.2f} rad")
         return ""
 

@@ -174,9 +174,16 @@ def _without_meshes(text: str, uris: set[str], urdf: Path) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
-def _links_without_inertial(urdf_text: str) -> set[str]:
-    root = ET.fromstring(urdf_text)
-    return {link.get("name") for link in root.findall("link") if link.find("inertial") is None}
+def _link_inertias(urdf_text: str) -> dict[str, float | None]:
+    """The largest ``|inertia entry|`` (kg m^2) of each link, None for a link without
+    ``<inertial>`` (0 for one without ``<inertia>`` in it)."""
+    out: dict[str, float | None] = {}
+    for link in ET.fromstring(urdf_text).findall("link"):
+        inertia = link.find("inertial/inertia")
+        out[link.get("name")] = None if link.find("inertial") is None else max(
+            (abs(float(v)) for v in ({} if inertia is None else inertia.attrib).values()),
+            default=0.0)
+    return out
 
 
 _BAD_INERTIA = "Bad inertia tensor properties, setting inertia to zero for link: "
@@ -196,36 +203,26 @@ def _importer_messages(text: str) -> list[str]:
     return said
 
 
-def _largest_inertia(urdf_text: str) -> dict[str, float]:
-    """The largest ``|inertia entry|`` (kg m^2) of each link with an ``<inertia>``."""
-    out = {}
-    for link in ET.fromstring(urdf_text).findall("link"):
-        inertia = link.find("inertial/inertia")
-        if inertia is not None:
-            out[link.get("name")] = max((abs(float(v)) for v in inertia.attrib.values()),
-                                        default=0.0)
-    return out
-
-
-def _log_importer_messages(urdf: Path, said: list[str], urdf_text: str) -> None:
+def _log_importer_messages(urdf: Path, said: list[str],
+                           inertias: dict[str, float | None]) -> None:
     """Log what pybullet's URDF importer printed, less what is corrected here: a link
     without ``<inertial>`` (given :data:`MASSLESS_LINK_MASS` below; the importer names it in
     a message of its own after its note) and a placeholder inertia it zeroes (entries
     <= 1e-5 kg m^2). Inertia tensors that are not positive definite, zeroed by pybullet
-    (anymal_c's cameras), are named at INFO; anything else is a warning."""
-    inertia = _largest_inertia(urdf_text)
+    (anymal_c's cameras), are named at INFO; anything else is a warning. ``inertias``:
+    :func:`_link_inertias` of the URDF."""
     zeroed, other = [], []
     skip_name = False
     for message in said:
         if skip_name:  # the link name the note about a missing <inertial> is followed by
             skip_name = False
-            if message not in inertia:
+            if inertias.get(message, 0.0) is None:
                 continue
         if message.startswith(_NO_INERTIAL):
             skip_name = True
         elif message.startswith(_BAD_INERTIA):
             link = message[len(_BAD_INERTIA):]
-            if inertia.get(link, 0.0) > _NEGLIGIBLE_INERTIA:
+            if (inertias.get(link) or 0.0) > _NEGLIGIBLE_INERTIA:
                 zeroed.append(link)
         else:
             other.append(message)
@@ -252,7 +249,7 @@ def load_robot(
             pybullet multiplies the two).
     """
     text = resolve_mesh_uris(urdf, search_dirs)
-    no_inertial = _links_without_inertial(text)
+    inertias = _link_inertias(text)
     failed: p.error | None = None
     with tempfile.TemporaryDirectory(prefix="horizon_mpc_urdf_") as tmp:
         path = Path(tmp) / urdf.name
@@ -271,7 +268,7 @@ def load_robot(
     if failed is not None:
         raise ValueError(f"pybullet could not load the URDF {urdf} ({failed})"
                          + (f"; its parser said: {' | '.join(said)}" if said else ""))
-    _log_importer_messages(urdf, said, text)
+    _log_importer_messages(urdf, said, inertias)
     if body < 0:
         raise RuntimeError(f"pybullet could not load the URDF {urdf}")
     root_link = p.getBodyInfo(body, physicsClientId=client)[0].decode()
@@ -286,7 +283,8 @@ def load_robot(
         fixed_joint[j] = info[2] == p.JOINT_FIXED
         if not fixed_joint[j]:
             joint_index[info[1].decode()] = j
-    massless = sorted(no_inertial & set(link_index))
+    massless = sorted(name for name, inertia in inertias.items()
+                      if inertia is None and name in link_index)
     for name in massless:
         p.changeDynamics(
             body,

@@ -184,8 +184,8 @@ class IlqrSolver(Solver):
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
         self._auto_box = False  # 'auto': this call went on with the box (_switch_to_box)
-        self._box_kept = False  # 'auto': a converging call did: the next ones start with it
-        # ... from the point it ended at (or that point shifted): (X, U) as stacked guesses
+        # 'auto': where the last converging call ended with the box, (X, U) as stacked guesses
+        # (or that point shifted): the next converging call from there starts with it
         self._box_start: tuple[np.ndarray, np.ndarray] | None = None
         self._shifted = False  # shift() since the last call (see _begin_call)
         # nodes whose projected rows went back to the augmented Lagrangian (_demote_dependent;
@@ -725,7 +725,7 @@ class IlqrSolver(Solver):
         # moving away and back: 23 iterations against 1), if it starts where that call
         # ended: from a cold guess the box diverges (a cart-pole solved in 78 iterations
         # from its guess ended at max_iter, 4x the cost, re-solved from the same guess)
-        self._auto_box = (self._box_kept and not self.opts["rti"] and self._auto_applies()
+        self._auto_box = (not self.opts["rti"] and self._auto_applies()
                           and self._starts_where_the_box_ended())
         self._box_from = 0 if self._auto_box else None
         if self._shifted and not self.opts["rti"]:
@@ -832,7 +832,6 @@ class IlqrSolver(Solver):
                     and self._auto_applies() and it < n_iter):
                 ev = self._switch_to_box(ev)
                 self._box_from = it if self._auto_box else None
-                self._box_kept = self._auto_box
                 if ev is None:
                     status = "not finite after the switch to the box"
                     break
@@ -1023,7 +1022,7 @@ class IlqrSolver(Solver):
         (:meth:`reset_multipliers`), and what the last solves learned of the problem (the
         'auto' box mode they kept, rows they moved to the augmented Lagrangian)."""
         self.reset_multipliers()
-        self._auto_box = self._box_kept = False
+        self._auto_box = False
         self._box_start = None
         self._box_from = None
         self._demoted[:] = False
