@@ -28,8 +28,8 @@ PACKAGE = "horizon_mpc"
 EXECUTABLES = {
     "mpc_node": "horizon_mpc.nodes.launcher:mpc_node",
     "sim_node": "horizon_mpc.nodes.launcher:sim_node",
-    "closed_loop": "horizon_mpc.closed_loop:main",
-    "motion": "horizon_mpc.motions.cli:main",
+    "closed_loop": "horizon_mpc.nodes.launcher:closed_loop",
+    "motion": "horizon_mpc.nodes.launcher:motion",
 }
 
 INSTALL_REQUIRES = [

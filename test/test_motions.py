@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -227,6 +228,28 @@ def test_cli_leaves_no_out_folder_behind_for_a_bad_locked_joint(tmp_path, capsys
     out = tmp_path / "new"
     assert main(["turn", "--set", "locked_joints=[foo]", "--out", str(out)]) == 2
     assert "foo" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_cli_interrupted_while_solving_exits_130_in_one_line(tmp_path, sig):
+    """Ctrl-C or a SIGTERM while the solver runs: one line and exit code 130 (it was a
+    KeyboardInterrupt traceback from inside CasADi, or the default SIGTERM death)."""
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    proc = subprocess.Popen(
+        [sys.executable, "-u", "-m", "horizon_mpc.motions", "leap", "--no-animation",
+         "--no-replay", "--out", str(tmp_path / "out")], cwd=tmp_path, env=env,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        header = proc.stdout.readline()  # printed once the model is built, before the solve
+        assert header.startswith("leap: "), header
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=60)
+        assert proc.returncode == 130, err[-2000:]
+        assert "motion: interrupted" in err and "Traceback" not in err, err[-2000:]
+        assert "solved" not in out
+    finally:
+        if proc.poll() is None:
+            proc.kill()
 
 
 @pytest.mark.slow

@@ -13,8 +13,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
+import signal
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -62,9 +64,33 @@ def _overrides(items: Sequence[str]) -> dict:
     return out
 
 
+# exit code of an interrupted run (SIGINT, SIGTERM), as a shell gives a process ended by SIGINT
+INTERRUPTED = 130
+
+
+def _interrupt(*_: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``motion`` executable; returns the process exit code
-    (0: solved and written; 1: the solver did not succeed, outputs written anyway)."""
+    (0: solved and written; 1: the solver did not succeed, outputs written anyway; 2: bad
+    arguments or settings; 130: interrupted by SIGINT or SIGTERM, one line and no
+    traceback; the outputs not written, or not all of them)."""
+    if threading.current_thread() is threading.main_thread():
+        # also when started with SIGINT ignored (a background job of a non-interactive
+        # shell); SIGTERM (a supervisor, `timeout`) as Ctrl-C
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("motion: interrupted (the outputs are not written, or not all of them)",
+              file=sys.stderr)
+        return INTERRUPTED
+
+
+def _main(argv: Sequence[str] | None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
