@@ -15,7 +15,7 @@ Schema (every section but ``robot``/``feet`` is optional and falls back to the d
     nominal_joints: {}         # per-joint overrides (rad), applied on top of the SRDF posture
     friction: 0.6              # friction coefficient used by the controller (linearised cone)
     foot_radius: 0.0           # m, foot frame to ground contact (the foot rolls on a sphere)
-    sim: {kp: 30.0, kd: 1.0, lateral_friction: 0.9, physics_rate: 1000.0}
+    sim: {kp: 30.0, kd: 1.0, lateral_friction: 0.9, physics_rate: 1000.0}  # kp, kd: or per joint
     mpc: {...}                 # see horizon_mpc.locomotion (gait, weights, horizon)
 """
 
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import difflib
 import math
 import os
 import sys
@@ -38,10 +39,11 @@ __all__ = ["RobotConfig", "SimGains", "check_settings", "config_dirs", "field_de
 
 @dataclass
 class SimGains:
-    """Joint-space PD gains and contact parameters of the simulator."""
+    """Joint-space PD gains (a number for every joint, or a list of one per joint in model
+    order) and contact parameters of the simulator."""
 
-    kp: float = 30.0
-    kd: float = 1.0
+    kp: float | list[float] = 30.0
+    kd: float | list[float] = 1.0
     lateral_friction: float = 0.9
     physics_rate: float = 1000.0
 
@@ -185,16 +187,69 @@ def check_settings(settings: object, positive: tuple[str, ...] = (),
 
 _KNOWN = {"robot", "urdf_path", "base_link", "feet", "nominal_posture", "nominal_joints",
           "friction", "foot_radius", "sim"}
+#: the sections read by other modules (``RobotConfig.section``): ``mpc`` (horizon_mpc.locomotion)
+SECTIONS = ("mpc",)
 
 
-def _non_negative(path: Path, key: str, value: Any) -> float:
+def _number(path: Path, key: str, value: Any, lowest: float = -math.inf,
+            strict: bool = False) -> float:
+    """``value`` as a finite float >= ``lowest`` (> with ``strict``), or a ValueError naming
+    the file and the key."""
     try:
+        if isinstance(value, bool):  # YAML 'yes'/'true' is no number
+            raise TypeError
         x = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{path}: '{key}' must be a number, got {value!r}") from None
-    if not x >= 0.0:
-        raise ValueError(f"{path}: '{key}' must be >= 0, got {x}")
+    if not math.isfinite(x) or x < lowest or (strict and x == lowest):
+        bound = f"{'>' if strict else '>='} {lowest:g}" if lowest > -math.inf else "finite"
+        raise ValueError(f"{path}: '{key}' must be {bound}, got {value!r}")
     return x
+
+
+def _non_negative(path: Path, key: str, value: Any) -> float:
+    return _number(path, key, value, 0.0)
+
+
+def _mapping(path: Path, key: str, value: Any) -> dict:
+    """``value`` (None: empty) as a mapping, or a ValueError naming the file and the key."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ValueError(f"{path}: '{key}' must be a mapping, got {value!r}")
+    return value
+
+
+def _sim_gains(path: Path, sim: dict) -> SimGains:
+    """The ``sim`` section: kp/kd a number >= 0 or a non-empty list of them (per joint; its
+    length is checked against the robot's joints by the simulator), the others positive."""
+    unknown = set(sim) - set(SimGains.__dataclass_fields__)
+    if unknown:
+        raise ValueError(f"{path}: unknown keys in 'sim': {sorted(unknown)} (known: "
+                         f"{sorted(SimGains.__dataclass_fields__)})")
+    out = {}
+    for key, value in sim.items():
+        if key in ("kp", "kd") and isinstance(value, list):
+            if not value:
+                raise ValueError(f"{path}: 'sim.{key}' is an empty list: give a number or one "
+                                 "per joint")
+            out[key] = [_non_negative(path, f"sim.{key}[{i}]", v) for i, v in enumerate(value)]
+        elif key in ("kp", "kd"):
+            out[key] = _non_negative(path, f"sim.{key}", value)
+        else:
+            out[key] = _number(path, f"sim.{key}", value, 0.0, strict=True)
+    return SimGains(**out)
+
+
+def _check_top_level_keys(path: Path, data: dict) -> None:
+    """A key that is neither a known setting nor a section: refused, with the nearest known
+    one (a misspelt ``mcp:`` section was ignored and the defaults used without a word)."""
+    known = sorted(_KNOWN | set(SECTIONS))
+    unknown = sorted(str(k) for k in data if k not in _KNOWN and k not in SECTIONS)
+    if unknown:
+        hints = [f"{k!r} (did you mean {close[0]!r}?)" if (close := difflib.get_close_matches(
+            k, known, n=1)) else repr(k) for k in unknown]
+        raise ValueError(f"{path}: unknown key(s) {', '.join(hints)}; known: {known}")
 
 
 def load_robot_config(name_or_path: str | Path) -> RobotConfig:
@@ -202,7 +257,9 @@ def load_robot_config(name_or_path: str | Path) -> RobotConfig:
 
     Raises:
         FileNotFoundError: no such config (the message lists the available ones).
-        ValueError: the file is not a mapping or lacks ``feet``/a robot source.
+        ValueError: the file is not a mapping, lacks ``feet``/a robot source, has a key
+            that is neither a setting nor a section, or a value of the wrong type (the
+            message names the file and the key).
     """
     path = find_config_file(name_or_path)
     data = read_yaml(path)
@@ -213,10 +270,8 @@ def load_robot_config(name_or_path: str | Path) -> RobotConfig:
     feet = data.get("feet")
     if not isinstance(feet, list) or not feet:
         raise ValueError(f"{path}: 'feet' must be a non-empty list of contact frame names")
-    sim = data.get("sim") or {}
-    unknown_sim = set(sim) - set(SimGains.__dataclass_fields__)
-    if unknown_sim:
-        raise ValueError(f"{path}: unknown keys in 'sim': {sorted(unknown_sim)}")
+    _check_top_level_keys(path, data)
+    joints = _mapping(path, "nominal_joints", data.get("nominal_joints"))
     return RobotConfig(
         name=path.stem,
         robot=data.get("robot"),
@@ -224,10 +279,11 @@ def load_robot_config(name_or_path: str | Path) -> RobotConfig:
         base_link=data.get("base_link", "base"),
         feet=[str(f) for f in feet],
         nominal_posture=data.get("nominal_posture", "standing"),
-        nominal_joints={str(k): float(v) for k, v in (data.get("nominal_joints") or {}).items()},
-        friction=float(data.get("friction", 0.6)),
+        nominal_joints={str(k): _number(path, f"nominal_joints.{k}", v)
+                        for k, v in joints.items()},
+        friction=_number(path, "friction", data.get("friction", 0.6), 0.0, strict=True),
         foot_radius=_non_negative(path, "foot_radius", data.get("foot_radius", 0.0)),
-        sim=SimGains(**{k: float(v) for k, v in sim.items()}),
-        sections={k: v for k, v in data.items() if k not in _KNOWN},
+        sim=_sim_gains(path, _mapping(path, "sim", data.get("sim"))),
+        sections={k: v for k, v in data.items() if k in SECTIONS},
         source=path,
     )

@@ -156,6 +156,54 @@ def _config(tmp_path: Path, text: str):
     return load_robot_config(str(path))
 
 
+_GO2 = "robot: go2\nfeet: [FL_foot, FR_foot, RL_foot, RR_foot]\n"
+
+
+@pytest.mark.parametrize("extra, match", [
+    ("mcp: {n_nodes: 30}\n", r"unknown key\(s\) 'mcp' \(did you mean 'mpc'\?\)"),
+    ("frictoin: 0.3\n", r"'frictoin' \(did you mean 'friction'\?\)"),
+    ("sim: 5\n", r"'sim' must be a mapping, got 5"),
+    ("sim: {kp: fast}\n", r"'sim.kp' must be a number, got 'fast'"),
+    ("sim: {kp: []}\n", r"'sim.kp' is an empty list"),
+    ("sim: {kd: [1, -2]}\n", r"'sim.kd\[1\]' must be >= 0, got -2"),
+    ("sim: {physics_rate: 0}\n", r"'sim.physics_rate' must be > 0"),
+    ("sim: {kpp: 3}\n", r"unknown keys in 'sim': \['kpp'\]"),
+    ("nominal_joints: [a, b]\n", r"'nominal_joints' must be a mapping"),
+    ("nominal_joints: {FL_calf_joint: abc}\n",
+     r"'nominal_joints.FL_calf_joint' must be a number, got 'abc'"),
+    ("friction: abc\n", r"'friction' must be a number, got 'abc'"),
+    ("friction: 0\n", r"'friction' must be > 0"),
+    ("friction: .nan\n", r"'friction' must be > 0"),
+    ("friction: true\n", r"'friction' must be a number, got True"),
+])
+def test_a_config_value_of_the_wrong_kind_is_one_error_naming_file_and_key(tmp_path, extra,
+                                                                           match):
+    """An auditor's configs: a misspelt section or key was ignored without a word (the
+    defaults used), and values of the wrong type ended in a traceback (sim: 5, a list for
+    nominal_joints) or a message naming neither the file nor the key (friction: abc)."""
+    with pytest.raises(ValueError, match=match) as err:
+        _config(tmp_path, _GO2 + extra)
+    assert "mine.yaml" in str(err.value)
+
+
+def test_per_joint_gains_in_the_config_reach_the_simulator(tmp_path):
+    """doc/simulator.md: the sim gains are a number or one per joint (a list was a
+    TypeError traceback in every executable)."""
+    from horizon_mpc.sim.simulator import Simulator
+
+    kp = [30.0] * 11 + [40.0]
+    cfg = _config(tmp_path, _GO2 + f"sim: {{kp: {kp}, kd: 2}}\n")
+    assert cfg.sim.kp == kp and cfg.sim.kd == 2.0
+    sim = Simulator(cfg)
+    try:
+        assert sim.kp.tolist() == kp and sim.kd.tolist() == [2.0] * 12
+    finally:
+        sim.close()
+    cfg = _config(tmp_path, _GO2 + "sim: {kp: [30, 30]}\n")
+    with pytest.raises(ValueError, match=r"kp must be a non-negative scalar or \(12,\) array"):
+        Simulator(cfg)
+
+
 def test_a_config_the_robot_cannot_stand_with_is_refused_by_name(tmp_path):
     """A user's config (an auditor's): a1 with urdf_path: in place of robot: kept
     'nominal_posture: standing' with no SRDF to read it from: every joint at 0, calves

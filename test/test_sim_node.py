@@ -12,6 +12,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -286,6 +287,29 @@ def test_defaults_come_from_the_robot_config_and_every_parameter_has_a_value(con
     node = SimNode(context=context, parameter_overrides=[Parameter("kp", value=12.5)])
     try:
         assert node.get_parameter("kp").value == 12.5 and node.sim.kp[0] == 12.5
+    finally:
+        node.destroy_node()
+
+
+def test_per_joint_gains_of_the_config_are_list_parameters_a_number_sets_them_all(
+        context, tmp_path):
+    """A config with one kp per joint (doc/simulator.md): sim_node declared kp as a number
+    and died on the list (a TypeError traceback); now kp is that list, and ``-p kp:=40``
+    gives every joint 40."""
+    src = (Path(__file__).resolve().parents[1] / "config" / "go2.yaml").read_text()
+    kp = [30.0] * 11 + [40.0]
+    path = tmp_path / "go2_gains.yaml"
+    path.write_text(src.replace("kp: 30.0", f"kp: {kp}"))
+    node = SimNode(context=context, parameter_overrides=[Parameter("config", value=str(path))])
+    try:
+        assert list(node.get_parameter("kp").value) == kp and node.sim.kp.tolist() == kp
+        assert node.get_parameter("kd").value == 1.0
+    finally:
+        node.destroy_node()
+    node = SimNode(context=context, parameter_overrides=[
+        Parameter("config", value=str(path)), Parameter("kp", value=40)])
+    try:
+        assert node.sim.kp.tolist() == [40.0] * 12
     finally:
         node.destroy_node()
 

@@ -49,6 +49,7 @@ from horizon_mpc.nodes.conversions import (
 )
 from horizon_mpc.nodes.declare import declare as declare_parameter
 from horizon_mpc.nodes.declare import float_range
+from horizon_mpc.nodes.declare import parameter_overrides as start_up_values
 from horizon_mpc.nodes.robot_description import description_file
 from horizon_mpc.nodes.spin import spin_until_signal
 from horizon_mpc.nodes.throttling import problem_kind
@@ -276,10 +277,24 @@ class SimNode(Node):
             if isinstance(default, FromConfig):
                 if cfg is None:
                     cfg = load_robot_config(self._param("config") or self._param("robot"))
-                default = float(default.read(cfg))
+                default = default.read(cfg)
+                if isinstance(default, list):  # per-joint gains: a number given is every joint's
+                    default = [float(x) for x in default]
+                    self._broadcast_number(name, len(default))
+                else:
+                    default = float(default)
             declare_parameter(self, name, default, description, *rng, read_only=True)
         return cfg if cfg is not None else load_robot_config(
             self._param("config") or self._param("robot"))
+
+    def _broadcast_number(self, name: str, n: int) -> None:
+        """A number given for the list parameter ``name`` (``-p kp:=40`` with per-joint gains
+        in the config) becomes that number for each of its ``n`` entries."""
+        overrides = start_up_values(self)
+        given = overrides.get(name)
+        if given is not None and given.type_ in (Parameter.Type.DOUBLE, Parameter.Type.INTEGER):
+            overrides[name] = Parameter(name, Parameter.Type.DOUBLE_ARRAY,
+                                        [float(given.value)] * n)
 
     def _param(self, name: str) -> object:
         try:
