@@ -35,8 +35,10 @@ PEER_STAMP := $(PEER_VENV)/.horizon_mpc-peer-$(PEER_HASH)
 BENCH ?= $(sort $(wildcard bench/bench_*.py))
 
 # Network hygiene: DDS traffic stays on 127.0.0.1, in a ROS domain private to this make run
-# (valid ids: 1-101, 215-232; override with `make demo ROS_DOMAIN_ID=7`).
+# (valid ids: 1-101, 215-232, never the environment's own ROS_DOMAIN_ID, the domain of the
+# user's other nodes; override with `make demo ROS_DOMAIN_ID=7`).
 ROS_DOMAIN_ID := $(shell $(PYTHON) -c 'import os; ids = [*range(1, 102), *range(215, 233)]; \
+	ids = [i for i in ids if str(i) != os.environ.get("ROS_DOMAIN_ID", "").strip()]; \
 	print(ids[os.getppid() % len(ids)])')
 export ROS_DOMAIN_ID
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST

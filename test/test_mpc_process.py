@@ -61,6 +61,19 @@ def test_the_default_domain_is_the_environment_s_else_private_to_this_process(mo
     assert all(0 < private_domain_id(pid) < 233 for pid in range(500))
 
 
+def test_a_private_domain_is_never_the_environment_s(monkeypatch):
+    """An auditor's exported ROS_DOMAIN_ID=83 was the private domain a lockstep run derived
+    from its pid: the auditor's hand-started mpc_node drove that run's simulator."""
+    monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)
+    free = [private_domain_id(pid) for pid in range(500)]
+    for pid in (0, 7, 118, 119, 499):
+        monkeypatch.setenv("ROS_DOMAIN_ID", str(free[pid]))
+        assert private_domain_id(pid) != free[pid]
+        assert 0 < private_domain_id(pid) < 233
+    monkeypatch.setenv("ROS_DOMAIN_ID", "not a number")  # nothing to avoid
+    assert [private_domain_id(pid) for pid in range(500)] == free
+
+
 def test_a_child_ignoring_sigint_is_terminated_after_the_timeout():
     proc = MpcProcess("go2", command=[sys.executable, "-c", STUBBORN]).start()
     try:

@@ -25,7 +25,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "horizon_mpc"
 SOURCE_ITEMS = ["setup.py", "setup.cfg", "pyproject.toml", "package.xml", "Makefile",
-                "resource", "scripts", "config", "launch", "doc", PACKAGE]
+                "LICENSE", "resource", "scripts", "config", "launch", "doc", PACKAGE]
 
 
 def _setup_py_constant(name: str):
@@ -142,6 +142,16 @@ def test_the_package_imports_its_api_on_first_use():
 
 # --------------------------------------------------------------------------------------------
 # Executables: one dict in setup.py, one launcher file each
+
+def test_the_license_declared_is_the_license_shipped():
+    """package.xml and setup.py declare Apache-2.0; no license text was in the repository
+    (nor in the sdist or wheel, which take LICENSE by setuptools' default)."""
+    root = ElementTree.parse(ROOT / "package.xml").getroot()
+    assert root.findtext("license").strip() == "Apache-2.0"
+    assert 'license="Apache-2.0"' in (ROOT / "setup.py").read_text()
+    text = (ROOT / "LICENSE").read_text(encoding="utf-8")
+    assert "Apache License" in text and "Version 2.0, January 2004" in text
+
 
 def test_scripts_folder_holds_exactly_one_launcher_per_executable():
     assert sorted(p.name for p in (ROOT / "scripts").iterdir()) == sorted(EXECUTABLES)

@@ -49,9 +49,14 @@ class MpcProcessError(RuntimeError):
 
 def private_domain_id(pid: int | None = None) -> int:
     """A ``ROS_DOMAIN_ID`` derived from ``pid`` (default: this process), so that closed
-    loops started in parallel by different processes do not hear each other."""
+    loops started in parallel by different processes do not hear each other; never the
+    environment's ``ROS_DOMAIN_ID``, the domain of the user's other nodes (a user's
+    exported 83 met a lockstep run that took 83: a hand-started mpc_node drove its
+    simulator)."""
     pid = os.getpid() if pid is None else pid
-    return PRIVATE_DOMAIN_IDS[pid % len(PRIVATE_DOMAIN_IDS)]
+    taken = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    ids = [d for d in PRIVATE_DOMAIN_IDS if str(d) != taken]
+    return ids[pid % len(ids)]
 
 
 def default_domain_id() -> int:
