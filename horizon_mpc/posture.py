@@ -17,12 +17,13 @@ import pinocchio as pin
 from horizon_mpc.config import RobotConfig
 from horizon_mpc.robots import example_robot_files, known_robots
 
-__all__ = ["load_pin_model", "srdf_joint_values", "standing_configuration"]
+__all__ = ["config_urdf_path", "load_pin_model", "srdf_joint_values", "standing_configuration"]
 
 log = logging.getLogger(__name__)
 
 
-def _urdf_path(cfg: RobotConfig) -> Path:
+def config_urdf_path(cfg: RobotConfig) -> Path:
+    """The URDF of ``cfg``: its ``urdf_path``, else its example-robot-data robot's."""
     if cfg.urdf_path:
         return Path(cfg.urdf_path)
     return example_robot_files(cfg.robot).urdf
@@ -30,7 +31,7 @@ def _urdf_path(cfg: RobotConfig) -> Path:
 
 def load_pin_model(cfg: RobotConfig, floating_base: bool = True) -> pin.Model:
     """The numeric Pinocchio model of ``cfg``'s URDF (free-flyer root by default)."""
-    path = _urdf_path(cfg)
+    path = config_urdf_path(cfg)
     if not path.is_file():
         raise FileNotFoundError(f"URDF {str(path)!r} of robot config {cfg.name!r} does not exist")
     if floating_base:

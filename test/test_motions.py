@@ -40,7 +40,8 @@ from horizon_mpc.motions.schedule import (
 )
 from horizon_mpc.motions.settings import MotionConfig
 from horizon_mpc.motions.turn import turn_schedule
-from horizon_mpc.motions.wholebody import quaternion_error, robot_model
+from horizon_mpc.motions.wholebody import build_whole_body, quaternion_error, robot_model
+from horizon_mpc.posture import standing_configuration
 
 ROOT = Path(__file__).resolve().parents[1]
 G = 9.81
@@ -63,6 +64,21 @@ def test_timeline_sampling_puts_lift_off_and_touchdown_nodes_in_stance():
     assert [n.tolist() for n in lift_off_nodes(s.stance)] == [[2], []]
 
 
+def test_timeline_times_off_the_node_grid_are_named_in_a_warning(caplog):
+    """The leap's push of 0.25 s at dt 0.02 was sampled as 0.24 s, its flight as 0.16 s,
+    silently; the default timeline is now on the grid and needs no warning."""
+    with caplog.at_level("WARNING", logger="horizon_mpc.motions.schedule"):
+        s = timeline_schedule([[(0.45, 0.75)]], n_nodes=60, dt=0.02)
+    assert "[0.45, 0.75] s are not on the 0.02 s node grid: taken as [0.44, 0.76] s" \
+        in caplog.text
+    assert np.flatnonzero(~s.stance[0]).tolist() == list(range(23, 38))
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="horizon_mpc.motions.schedule"):
+        st = _settings("leap", LeapSettings, "go2")
+        leap_schedule(st, [0, 1], [2, 3])
+    assert caplog.text == ""
+
+
 @pytest.mark.parametrize("intervals", [3, 5, 7])
 def test_a_swing_over_an_odd_number_of_intervals_reaches_its_apex_on_the_nodes(intervals):
     # no node at mid-swing: the apex used to be 0.79 (3 intervals) / 0.92 (5) of the height
@@ -82,6 +98,27 @@ def test_a_swing_over_an_odd_number_of_intervals_reaches_its_apex_on_the_nodes(i
 def test_timeline_rejects_bad_swings(swings, match):
     with pytest.raises(ValueError, match=match):
         timeline_schedule(swings, n_nodes=10, dt=0.1)
+
+
+def test_trunk_points_are_the_corners_of_the_base_collision_box():
+    """a1's trunk is one collision box (0.2675 x 0.194 x 0.114 m) and a zero-size IMU box;
+    anymal_c's base carries boxes and cylinders on links fixed to it."""
+    from horizon_mpc.motions.body import point_heights, trunk_points
+    from horizon_mpc.posture import load_pin_model
+
+    cfg = load_robot_config("a1")
+    pts = trunk_points(cfg, load_pin_model(cfg))
+    assert len(pts) == 8
+    np.testing.assert_allclose(np.sort(np.unique(np.abs(pts).round(4))),
+                               [0.057, 0.097, 0.1338], atol=1e-3)
+    q = np.zeros(19)
+    q[2], q[6] = 0.3, 1.0
+    np.testing.assert_allclose(point_heights(q, pts), 0.3 + pts[:, 2])
+    q[3:7] = [np.sin(np.pi / 4), 0.0, 0.0, np.cos(np.pi / 4)]  # 90 deg about x: y goes up
+    np.testing.assert_allclose(point_heights(q, pts), 0.3 + pts[:, 1], atol=1e-12)
+    cfg = load_robot_config("anymal_c")
+    pts = trunk_points(cfg, load_pin_model(cfg))
+    assert pts[:, 0].max() > 0.5 and pts[:, 2].max() > 0.15  # the faces, the lidar cage
 
 
 def test_crawl_order_lifts_each_foot_once_in_the_walk_gaits_order():
@@ -230,6 +267,19 @@ def test_cli_leaves_no_out_folder_behind_for_a_bad_locked_joint(tmp_path, capsys
     assert "foo" in capsys.readouterr().err and not out.exists()
 
 
+def test_cli_leaves_no_out_folder_behind_for_a_motion_it_cannot_build(tmp_path, capsys):
+    """A walk too short to build: the folders made for its outputs were left empty (an
+    auditor's); a folder that was there stays."""
+    from horizon_mpc.motions.cli import main
+
+    out = tmp_path / "new" / "deeper"
+    assert main(["walk", "--set", "duration=0.02", "--out", str(out)]) == 2
+    assert "cannot build the walk" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+    assert main(["walk", "--set", "duration=0.02", "--out", str(tmp_path)]) == 2
+    assert tmp_path.is_dir()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_cli_interrupted_while_solving_exits_130_in_one_line(tmp_path, sig):
     """Ctrl-C or a SIGTERM while the solver runs: one line and exit code 130 (it was a
@@ -246,7 +296,7 @@ def test_cli_interrupted_while_solving_exits_130_in_one_line(tmp_path, sig):
         out, err = proc.communicate(timeout=60)
         assert proc.returncode == 130, err[-2000:]
         assert "motion: interrupted" in err and "Traceback" not in err, err[-2000:]
-        assert "solved" not in out
+        assert "solved" not in out and not (tmp_path / "out").exists()
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -450,6 +500,32 @@ def test_leap_joint_torques_stay_within_the_urdf_limits(leap):
 
 
 @pytest.mark.slow
+def test_leap_keeps_the_trunk_above_the_ground(leap):
+    """An auditor's Pinocchio check of the collision meshes: the go2 landed nose-down with
+    its trunk 9 cm below the ground (the replay leaned on it, 134 N of its 158 N weight).
+    Checked here with Pinocchio's collision model and distance to the plane, independent of
+    the plan's own trunk points."""
+    import pinocchio as pin
+
+    from horizon_mpc.motions.body import trunk_points
+
+    res, st, model, cfg = leap
+    assert st.trunk_clearance is not None and st.trunk_clearance > 0
+    assert res.summary["min_trunk_height"] >= st.trunk_clearance - 1e-6
+    # the trunk points bound the base's collision shapes: every vertex of its box is one of
+    # them or inside their hull; their heights are Pinocchio's placements of those points
+    pts = trunk_points(cfg, model.pin_model)
+    assert len(pts) >= 4
+    data = model.pin_model.createData()
+    lowest = np.inf
+    for k in range(res.q.shape[1]):
+        pin.forwardKinematics(model.pin_model, data, res.q[:, k])
+        base = data.oMi[1]
+        lowest = min(lowest, float(np.min(pts @ base.rotation[2] + base.translation[2])))
+    assert lowest == pytest.approx(res.summary["min_trunk_height"], abs=1e-9)
+
+
+@pytest.mark.slow
 def test_leap_replayed_open_loop_in_pybullet_lands_upright_near_the_target(leap):
     from horizon_mpc.motions.replay import replay
 
@@ -587,6 +663,26 @@ def test_walk_shifts_the_horizon_one_node_per_tick(walk):
     assert np.all(res.arrays["iterations"][1:] == st.iterations)  # real-time iterations
 
 
+@pytest.mark.slow
+def test_a_whole_body_solution_carries_its_transcription_s_integrator(go2):
+    """build_whole_body(integrator=...) solved: the result said 'rk4', and the dynamics
+    check of a correct Euler solution found defects of 3.7e-3 (an auditor's)."""
+    cfg, model = go2
+    _, q0 = standing_configuration(cfg, model.pin_model)
+    n, integrator = 6, "euler"
+    wb = build_whole_body(model, list(cfg.feet), n, 0.02, q0, 0.6, integrator=integrator)
+    q_final = q0.copy()
+    q_final[2] -= 0.02
+    wb.add_final_state(q_final, joints=False)
+    wb.set_schedule(timeline_schedule([[] for _ in cfg.feet], n, 0.02))
+    wb.prb.create_cost("acceleration", wb.a, weight=1e-3)
+    res = wb.solve("ipopt")
+    assert res.stats["success"] and res.integrator == integrator
+    assert dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)[
+        "max_defect"] <= 1e-6
+    assert dynamics_check(res, model.pin_model, res.foot_radius, "rk4")["max_defect"] > 1e-5
+
+
 @pytest.fixture(scope="module")
 def short_walks(go2):
     """Three ticks of the walk with each NLP solver (both converge at every tick)."""
@@ -629,6 +725,12 @@ def test_outputs_hold_the_solution_figures_animation_and_summary(walk, tmp_path)
     np.testing.assert_array_equal(data["q"], res.q)
     np.testing.assert_array_equal(data["f"], res.f)
     assert list(data["feet"]) == res.feet
+    # the file says how to check it: the walk integrates Euler steps, with forces at the
+    # foot frames and a stance condition on rolling ball feet (an auditor read RK4 and
+    # point feet, and found defects the solution does not have)
+    assert str(data["integrator"]) == res.integrator == "euler"
+    assert float(data["foot_radius"]) == 0.0
+    assert float(data["stance_foot_radius"]) == load_robot_config("go2").foot_radius > 0
     for name in ("contact_forces", "base_and_torques"):
         assert Image.open(files[name]).size[0] >= 600
     gif = Image.open(files["animation"])

@@ -572,6 +572,19 @@ def test_states_stamped_0_are_named_as_unset_stamps(harness, monkeypatch):
     assert "joint_states and odom stamped 0: header.stamp unset?" in said[-1]
     assert mpc_node._unset_hint(5, 7) == ""  # sim time starts at 0: only the stale say so
 
+
+def test_states_on_another_clock_are_named_as_such(harness, monkeypatch):
+    """sim_node's states (sim time, seconds since the start) read by a node left on wall
+    time: 'the state is 1795748809.324 s old', and nothing about the clocks (an auditor's)."""
+    h = harness(state_timeout=0.2)
+    said: list[str] = []
+    monkeypatch.setattr(h.node, "_warn", lambda kind, text: said.append(text))
+    h.publish_state(stamp_ns=12_000_000_000)  # 12 s of sim time
+    h.spin_until(lambda: h.node.stale_skips > 0)
+    assert h.trajectories == []
+    assert "do the publisher and this node use the same clock (use_sim_time)?" in said[-1]
+    assert mpc_node._unset_hint(5, 7, age=2.0) == ""  # late, not on another clock
+
 def test_states_that_stop_arriving_are_reported_stale(harness):
     """Timer trigger: when the states stop, the node publishes nothing new and, once the
     last state is older than state_timeout, counts stale skips and sends a WARN status (it
@@ -1883,6 +1896,43 @@ def test_a_publishers_fixed_layout_is_said_once_repairs_stay_throttled(context, 
         assert len(extra) == 1 and "said once" in extra[0], log.warnings
         assert len(frames) == 1 and "'imu_link'" in frames[0] and "base" in frames[0]
     finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize("reliability", ["best_effort", "reliable"])
+def test_cmd_vel_from_a_best_effort_publisher_is_heard_by_default_else_named(
+        context, walking_mpc, monkeypatch, reliability):
+    """A joystick driver publishing cmd_vel best effort never reached the reliable
+    subscription: the robot stood, diagnostics OK (an auditor's). By default the
+    subscription is best effort (hears both kinds); set to reliable, the mismatch is named
+    with the parameter to change."""
+    from rclpy.qos import qos_profile_sensor_data
+
+    node = sim_time_node(context, walking_mpc, cmd_reliability=reliability)
+    log = _Logger()
+    monkeypatch.setattr(node, "get_logger", lambda: log)
+    joystick = Node("joystick", context=context)
+    pub = joystick.create_publisher(Twist, "cmd_vel", qos_profile_sensor_data)
+    msg = Twist()
+    msg.linear.x = 0.2
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    executor.add_node(joystick)
+    try:
+        end = time.monotonic() + (5.0 if reliability == "best_effort" else 1.5)
+        while time.monotonic() < end and node._cmd is None:
+            pub.publish(msg)
+            executor.spin_once(timeout_sec=0.02)
+        assert (node._cmd is not None) == (reliability == "best_effort")
+        node._check_input_types()
+        warned = [w for w in log.warnings if "best effort" in w]
+        if reliability == "reliable":
+            assert len(warned) == 1 and "-p cmd_reliability:=best_effort" in warned[0]
+        else:
+            assert not warned
+    finally:
+        executor.shutdown()
+        joystick.destroy_node()
         node.destroy_node()
 
 

@@ -24,6 +24,7 @@ from horizon_mpc.motions.analysis import (
     flight_phases,
     loaded,
 )
+from horizon_mpc.motions.body import point_heights, trunk_points
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import timeline_schedule
 from horizon_mpc.motions.settings import check_settings
@@ -48,12 +49,15 @@ class LeapSettings:
 
     dt: float = 0.02
     stand: float = 0.2  # all feet down before the leap
-    push: float = 0.25  # front feet up, hind legs pushing
-    flight: float = 0.15  # all feet in the air
-    land: float = 0.15  # front feet down, hind feet still in the air
-    settle: float = 0.45  # all feet down until the end
+    push: float = 0.24  # front feet up, hind legs pushing
+    flight: float = 0.16  # all feet in the air
+    land: float = 0.16  # front feet down, hind feet still in the air
+    settle: float = 0.44  # all feet down until the end
     distance: float = 0.4  # forward displacement of the base (m)
     swing_floor: float = 0.08  # mid-swing height (m) the swinging feet must stay above
+    # m the trunk (its collision shapes, horizon_mpc.motions.body) stays above the ground on
+    # every node; None: unconstrained (the go2 landed nose-down, its trunk 9 cm deep)
+    trunk_clearance: float | None = 0.02
     friction: float | None = None  # None: the robot config's
     foot_radius: float | None = None  # ball feet (m); None: the robot config's
     locked_joints: list[str] = field(default_factory=list)  # held at the nominal posture
@@ -73,6 +77,7 @@ class LeapSettings:
         check_settings(self, positive=("dt", "push", "flight", "land", "friction",
                                        "torque_limit_scale"),
                        non_negative=("stand", "settle", "swing_floor", "foot_radius",
+                                     "trunk_clearance",
                                      "replay_kp", "replay_kd", "w_posture", "w_pitch",
                                      "w_roll_yaw", "w_lateral", "w_velocity", "w_acceleration",
                                      "w_force", "w_torque"))
@@ -97,6 +102,7 @@ class LeapProblem:
     p_des: np.ndarray  # (3,) final base position (m)
     front: list[int]  # indices of the front feet in ``wb.feet``
     hind: list[int]
+    trunk: np.ndarray  # (k, 3) points of the trunk in the base frame (horizon_mpc.motions.body)
 
 
 def leap_schedule(st: LeapSettings, front: list[int], hind: list[int]) -> ContactSchedule:
@@ -142,6 +148,11 @@ def build_leap(model: RobotModel, cfg: RobotConfig, st: LeapSettings) -> LeapPro
     wb.add_final_state(q_final)
     sched = leap_schedule(st, front, hind)
     wb.set_schedule(sched, floor=True)
+    trunk = trunk_points(cfg, model.pin_model)
+    if st.trunk_clearance is not None and len(trunk):
+        prb.create_constraint("trunk_clearance", point_heights(q, trunk),
+                              bounds=(np.full(len(trunk), st.trunk_clearance),
+                                      np.full(len(trunk), np.inf)))
 
     diff = model.difference()(q0, q)
 
@@ -162,7 +173,7 @@ def build_leap(model: RobotModel, cfg: RobotConfig, st: LeapSettings) -> LeapPro
     wb.guess(qg, sched.stance)
     log.info("leap: %s, N=%d, dt=%.3f s, target %s", model.name, st.n_nodes, st.dt,
              np.round(p_des, 3).tolist())
-    return LeapProblem(wb, st, p_des, front, hind)
+    return LeapProblem(wb, st, p_des, front, hind, trunk)
 
 
 def leap_summary(res: MotionResult, lp: LeapProblem, model: RobotModel) -> dict:
@@ -204,6 +215,10 @@ def leap_summary(res: MotionResult, lp: LeapProblem, model: RobotModel) -> dict:
         out["hind_touchdown"] = [first_after(i) for i in lp.hind]
     limit = model.joint_effort_limit
     out["max_torque_ratio"] = float(np.max(np.abs(res.tau[6:]) / limit[:, None]))
+    # the trunk's lowest point on the nodes (m; null without collision shapes)
+    out["min_trunk_height"] = (float(min(point_heights(res.q[:, k], lp.trunk).min()
+                                         for k in range(res.q.shape[1])))
+                               if len(lp.trunk) else None)
     dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
     out["max_dynamics_defect"] = dyn["max_defect"]
     out["max_base_wrench"] = dyn["max_base_wrench"]

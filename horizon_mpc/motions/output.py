@@ -3,7 +3,10 @@
 Files in the output folder::
 
     solution.npz           t (N+1), q, v (per node), a, f, tau (per interval), stance,
-                           feet, joint_names, dt, and the motion's extra arrays
+                           feet, joint_names, dt, integrator (of the transcription: what
+                           the next node follows from), foot_radius (where the dynamics
+                           apply the forces), and the motion's extra arrays (the walk's
+                           stance_foot_radius: its stance condition's rolling ball feet)
     contact_forces.png     forces of every foot over time (paper Fig. 2 style)
     base_and_torques.png   base position and orientation, joint torques
     animation.gif          the motion rendered headless (PyBullet TinyRenderer)
@@ -35,7 +38,7 @@ def write_solution(res: MotionResult, path: str | Path) -> Path:
     np.savez_compressed(path, t=res.t, q=res.q, v=res.v, a=res.a, f=res.f, tau=res.tau,
                         stance=res.stance, feet=np.array(res.feet),
                         joint_names=np.array(res.joint_names), dt=res.dt,
-                        foot_radius=res.foot_radius, **res.arrays)
+                        integrator=res.integrator, foot_radius=res.foot_radius, **res.arrays)
     return path
 
 

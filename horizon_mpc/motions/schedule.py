@@ -13,6 +13,7 @@ periodic gaits of :mod:`horizon_mpc.locomotion.gaits` instead.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 
 import numpy as np
@@ -21,10 +22,13 @@ from horizon_mpc.locomotion.gaits import GAITS, ContactSchedule
 
 __all__ = ["crawl_order", "lift_off_nodes", "timeline_schedule", "touchdown_nodes"]
 
+log = logging.getLogger(__name__)
+
 
 def timeline_schedule(swings: Sequence[Sequence[tuple[float, float]]], n_nodes: int, dt: float,
                       step_height: float = 0.0) -> ContactSchedule:
-    """Sample per-foot swing intervals on nodes ``0..n_nodes``.
+    """Sample per-foot swing intervals on nodes ``0..n_nodes`` (a time between two nodes is
+    taken at the nearest one, ties to the even node, with a warning).
 
     Args:
         swings: per foot, a list of ``(t_lift, t_touch)`` intervals (s), in time order.
@@ -39,6 +43,11 @@ def timeline_schedule(swings: Sequence[Sequence[tuple[float, float]]], n_nodes: 
         ValueError: an interval shorter than two nodes, overlapping intervals, or an
             interval outside the horizon.
     """
+    off_grid = sorted({t for intervals in swings for pair in intervals for t in pair
+                       if abs(t / dt - round(t / dt)) > 1e-6})
+    if off_grid:  # the leap's push of 0.25 s was 0.24, its flight 0.16, without a word
+        log.warning("contact times %s s are not on the %g s node grid: taken as %s s", off_grid,
+                    dt, [round(round(t / dt) * dt, 9) for t in off_grid])
     n_feet = len(swings)
     stance = np.ones((n_feet, n_nodes + 1), bool)
     progress = np.zeros((n_feet, n_nodes + 1))

@@ -184,7 +184,10 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
     res = MotionResult("walk", cfg.name, solver, list(wp.feet), list(model.joint_names), dt,
                        np.array(Q).T, np.array(V).T, np.array(A).T, np.array(F).T,
                        np.array(TAU).T, np.array(S).T, stats, integrator="euler")
-    res.arrays.update(v_ref=np.array([cmd[0], cmd[1], 0.0, 0.0, 0.0, cmd[2]]),
+    # the dynamics apply the forces at the foot frames (res.foot_radius 0), the stance
+    # condition holds a rolling ball foot still: one foot model for both is not solved
+    res.arrays.update(stance_foot_radius=cfg.foot_radius,
+                      v_ref=np.array([cmd[0], cmd[1], 0.0, 0.0, 0.0, cmd[2]]),
                       tick_time=np.array(tick_time), iterations=np.array(iterations),
                       violation=np.array(violation))
     res.summary = walk_summary(res, gait.period, st, model, mpc.gait.step_height)

@@ -91,6 +91,7 @@ class WholeBodyProblem:
     schedule: ContactSchedule | None = None
     rest_at_end: bool = False
     foot_radius: float = 0.0
+    integrator: str = "rk4"  # of the transcription (the solution's consistency check uses it)
 
     def add_final_state(self, q_final: np.ndarray, position: bool = True,
                         orientation: bool = True, joints: bool = True,
@@ -172,7 +173,7 @@ class WholeBodyProblem:
                             list(self.model.joint_names), float(self.prb.dt),
                             sol["q"].copy(), sol["v"].copy(), sol["a"].copy(), sol["f"].copy(),
                             tau, np.asarray(stance, bool).copy(), stats,
-                            foot_radius=self.foot_radius)
+                            foot_radius=self.foot_radius, integrator=self.integrator)
 
     def guess(self, q: np.ndarray, stance: np.ndarray | None = None) -> None:
         """Initial guess: configurations ``q`` ((nq,) or (nq, N+1)), velocities from their
@@ -340,6 +341,6 @@ def build_whole_body(model: RobotModel, feet: list[str], n_nodes: int, dt: float
     log.debug("whole-body problem: %s, N=%d, dt=%.3f s, %d feet", model.name, n_nodes, dt,
               len(feet))
     wb = WholeBodyProblem(prb, model, list(feet), q, v, a, f, tau, contacts, touchdown, above,
-                          q0, foot_radius=foot_radius)
+                          q0, foot_radius=foot_radius, integrator=integrator)
     wb.guess(q0)
     return wb

@@ -276,14 +276,16 @@ class MpcNode(MpcParameters, Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_path = self.create_publisher(Path, "~/predicted_base_path", 10)
         # depth 1: a tick plans from the newest state, never from a backlog of stale ones
-        state_qos = QoSProfile(depth=1, reliability=(
-            ReliabilityPolicy.BEST_EFFORT if self._p("state_reliability") == "best_effort"
-            else ReliabilityPolicy.RELIABLE))
+        state_qos = QoSProfile(depth=1, reliability=_RELIABILITY[self._p("state_reliability")])
+        # best effort by default: it also hears best-effort publishers (a reliable
+        # subscription never received a joystick driver's sensor-data cmd_vel; the robot
+        # stood with diagnostics OK)
+        cmd_qos = QoSProfile(depth=10, reliability=_RELIABILITY[self._p("cmd_reliability")])
         self._inputs = (
             self.create_subscription(JointState, "joint_states", self._on_joint_state,
                                      state_qos),
             self.create_subscription(Odometry, "odom", self._on_odom, state_qos),
-            self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10))
+            self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, cmd_qos))
         accept_integers_for_floats(self)  # ros2 param set /mpc max_vx 1
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if self.trigger == "timer":
@@ -378,17 +380,23 @@ class MpcNode(MpcParameters, Node):
         """Say (once each) which publishers on an input topic send another message type, a
         TwistStamped cmd_vel above all (Jazzy's teleop and nav2 can publish those): DDS
         never connects the two and nothing else says so; the robot just stands."""
-        for sub in self._inputs:
+        for sub, parameter in zip(self._inputs, _RELIABILITY_PARAMETER, strict=True):
             ours = message_type_name(sub.msg_type)
             for info in self.get_publishers_info_by_topic(sub.topic_name):
+                # a publisher's node is named once discovery has caught up
+                who = ("a node" if "_UNKNOWN_" in info.node_name else
+                       f"{info.node_namespace.rstrip('/')}/{info.node_name}")
                 if info.topic_type != ours:
-                    # a publisher's node is named once discovery has caught up
-                    who = ("a node" if "_UNKNOWN_" in info.node_name else
-                           f"{info.node_namespace.rstrip('/')}/{info.node_name}")
                     self._warn_once(f"{sub.topic_name}: {who} publishes {info.topic_type}, "
                                     f"this node subscribes {ours}: none of its messages "
                                     "arrive (different types never connect)",
                                     key=f"{sub.topic_name} {info.topic_type}")
+                elif (info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+                      and self._p(parameter) == "reliable"):
+                    self._warn_once(f"{sub.topic_name}: {who} publishes best effort, this "
+                                    "node subscribes reliable: none of its messages arrive; "
+                                    f"start the node with -p {parameter}:=best_effort",
+                                    key=f"{sub.topic_name} best effort")
 
     def current_command(self) -> np.ndarray:
         """The command to use now: the last cmd_vel, or zero once it is older than
@@ -570,7 +578,7 @@ class MpcNode(MpcParameters, Node):
         if age > self.state_timeout:
             return self._skip_stale(age, "stale", f"the state is {age:.3f} s old "
                                     f"(state_timeout {self.state_timeout:g} s); not planning"
-                                    + _unset_hint(joints[0], base[0]), stamp_ns, now_ns)
+                                    + _unset_hint(joints[0], base[0], age), stamp_ns, now_ns)
         # stamped ahead of the node's clock: clocks differ. Either stream: the plan's stamp
         # is the older one's, and a joint_states stream 1 s ahead of a correct odom was
         # planned from without a word
@@ -797,12 +805,29 @@ class MpcNode(MpcParameters, Node):
         return ""
 
 
-def _unset_hint(joints_ns: int, base_ns: int) -> str:
+_RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE,
+                "best_effort": ReliabilityPolicy.BEST_EFFORT}
+# the parameter that sets the reliability of each input (joint_states, odom, cmd_vel)
+_RELIABILITY_PARAMETER = ("state_reliability", "state_reliability", "cmd_reliability")
+
+
+#: s: a state this much older than the node's clock is on another clock (sim time against
+#: wall time: ~1.8e9 s), not late
+OTHER_CLOCK_AGE = 3600.0
+
+
+def _unset_hint(joints_ns: int, base_ns: int, age: float = 0.0) -> str:
     """What to say of states stamped 0 (a driver that leaves header.stamp unset) when the
-    node's clock is far past them; empty otherwise (sim time starts at 0)."""
+    node's clock is far past them (sim time starts at 0), or of states on another clock
+    (``age`` s old: a simulator's sim time read on wall time); empty otherwise."""
     unset = [name for name, ns in (("joint_states", joints_ns), ("odom", base_ns)) if ns == 0]
-    return (f" ({' and '.join(unset)} stamped 0: header.stamp unset? the driver must stamp "
-            "each message with the time of its measurement)") if unset else ""
+    if unset:
+        return (f" ({' and '.join(unset)} stamped 0: header.stamp unset? the driver must "
+                "stamp each message with the time of its measurement)")
+    if age > OTHER_CLOCK_AGE:  # sim_node's states read by a node on wall time said only "old"
+        return (" (more than an hour old: do the publisher and this node use the same clock "
+                "(use_sim_time)?)")
+    return ""
 
 
 def message_type_name(msg_type: type) -> str:

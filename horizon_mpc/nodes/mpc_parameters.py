@@ -257,6 +257,10 @@ class MpcParameters:
           "subscriptions: 'reliable' (matches reliable publishers: ros2 topic pub, sim_node) "
           "or 'best_effort' (matches both, e.g. a driver publishing with the sensor-data "
           "profile, which a reliable subscription never receives)", ro=True)
+        d("cmd_reliability", "best_effort", "QoS reliability of the cmd_vel subscription: "
+          "'best_effort' (matches reliable and best-effort publishers: teleop, nav2, a "
+          "joystick driver's sensor-data profile) or 'reliable' (reliable publishers only)",
+          ro=True)
         d("gait", st.gait.name, f"gait ({', '.join(GAITS)}); live")
         d("step_duration", float(st.gait.step_duration), "swing duration (s); live",
           float_range(0.05, 2.0))
@@ -292,9 +296,10 @@ class MpcParameters:
           "node clock (at most one per tick, and at once when the level rises; 0: every tick)",
           float_range(0, 1000), ro=True)
         self._check_trigger(self._p("trigger"))
-        if self._p("state_reliability") not in ("reliable", "best_effort"):
-            raise ValueError("state_reliability must be 'reliable' or 'best_effort', got "
-                             f"{self._p('state_reliability')!r}")
+        for name in ("state_reliability", "cmd_reliability"):
+            if self._p(name) not in ("reliable", "best_effort"):
+                raise ValueError(f"{name} must be 'reliable' or 'best_effort', got "
+                                 f"{self._p(name)!r}")
 
     @staticmethod
     def _check_trigger(trigger: str) -> None:
