@@ -1848,6 +1848,28 @@ def test_a_stopped_simulator_is_reported_on_the_wall_clock(context, walking_mpc)
         node.destroy_node()
 
 
+def test_a_node_waiting_for_its_states_says_so_on_diagnostics(context, walking_mpc):
+    """A node with no joint_states / odom yet published nothing on /diagnostics: an
+    aggregator could not tell it from a node that is not running (an auditor's). The
+    wall-clock watchdog now sends a WARN naming what is missing, every look."""
+    node = sim_time_node(context, walking_mpc)
+    node._pub_diag = Sent()
+    try:
+        for _ in range(2):
+            sent = len(node._pub_diag.msgs)
+            node._check_progress()
+            assert len(node._pub_diag.msgs) == sent + 1
+            status = node._pub_diag.msgs[-1].status[0]
+            assert status.level == DiagnosticStatus.WARN
+            assert status.message == "waiting for joint_states and odom: not planning"
+        drive_in_sim_time(node, 3)  # planning: the watchdog has nothing to add
+        sent = len(node._pub_diag.msgs)
+        node._check_progress()
+        assert len(node._pub_diag.msgs) == sent
+    finally:
+        node.destroy_node()
+
+
 def test_use_sim_time_outside_ros_args_is_no_parameter(walking_mpc):
     """'-p use_sim_time:=false' before --ros-args is ignored by rcl (warned about as a plain
     argument) and must not switch the sim-time default off either."""

@@ -353,6 +353,13 @@ class MpcNode(MpcParameters, Node):
         they stopped (wall clock: a stopped simulator stops the sim clock as well)."""
         self._check_input_types()
         ticks, clock_ns = self.ticks + self.stale_skips, self.get_clock().now().nanoseconds
+        if self._joints is None or self._base is None:
+            # a node waiting for its inputs says so on /diagnostics too: an aggregator saw
+            # nothing of it, as of a node that is not running
+            missing = [n for n, x in (("joint_states", self._joints), ("odom", self._base))
+                       if x is None]
+            self._publish_diagnostics(None, clock_ns, clock_ns, force=True, waiting=(
+                f"waiting for {' and '.join(missing)}: not planning"))
         prev_states, prev_ticks, prev_clock = self._watch
         self._watch = (self._states_in, ticks, clock_ns)
         if self._states_in == prev_states and self.plan is not None:
@@ -726,13 +733,16 @@ class MpcNode(MpcParameters, Node):
         return ((t - sch.t_start) / period) % 1.0
 
     def _publish_diagnostics(self, plan: Plan | None, stamp_ns: int,
-                             now_ns: int | None = None, force: bool = False) -> None:
+                             now_ns: int | None = None, force: bool = False,
+                             waiting: str | None = None) -> None:
         """The node's status, when ``diagnostics_rate`` says so, its level rose or ``force``
         (the wall-clock watchdog: a stopped simulator stops the node clock the rate is
-        counted on, and the stale status went out once, then never again)."""
+        counted on, and the stale status went out once, then never again). Without a plan:
+        WARN, ``waiting`` (no state yet) or the stale state's message."""
         if plan is None:
             age = "stale" if self.last_state_age > 0 else "future-stamped"
-            level, message, stats = DiagnosticStatus.WARN, f"{age} state: not planning", {}
+            level, stats = DiagnosticStatus.WARN, {}
+            message = waiting or f"{age} state: not planning"
         else:
             # WARN on a failure (the plan is the standing fallback), not on a real-time
             # iteration that leaves some violation: one iteration per tick rarely reaches
