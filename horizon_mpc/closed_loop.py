@@ -658,6 +658,13 @@ def main(argv: Sequence[str] | None = None) -> int:
              age["median"], age["p95"], summary["falls"]["count"])
     for path in written:
         log.info("wrote %s", path)
+    rate = 1.0 / control_period(args.robot, mpc_parameters)
+    if summary["ticks_per_sim_second"] < TICK_RATE_KEPT * rate:  # a loaded host, real time
+        log.warning("the MPC ticked %.1f times per sim second, %.0f %% of its %.0f Hz control "
+                    "rate: this run is no real-time loop at that rate (other jobs on the "
+                    "cores?); --mode lockstep does not depend on the host's speed",
+                    summary["ticks_per_sim_second"],
+                    100 * summary["ticks_per_sim_second"] / rate, rate)
     if rec.interrupted:
         log.error("interrupted: the outputs cover the run until t = %.2f s", rec.t[-1])
         return 130
@@ -669,6 +676,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                   "messages", "; ".join(summary["foreign_publishers"]))
         return 1
     return 0
+
+
+#: fraction of the control rate below which a run is said not to have kept it (a 2 s real-time
+#: run on a loaded host ticked 11 times per sim second at 50 Hz and said nothing)
+TICK_RATE_KEPT = 0.8
 
 
 def run_domain_id(mode: str, domain_id: int | None = None) -> int:

@@ -805,6 +805,29 @@ def test_segments_shorter_than_the_control_period_are_warned_about(monkeypatch, 
     assert "segment(s) [0, 1, 2, 3] last less than the control period (0.02 s)" in caplog.text
 
 
+@pytest.mark.parametrize("ticks, warned", [(11.0, True), (49.6, False)])
+def test_a_run_that_did_not_keep_the_control_rate_says_so(monkeypatch, caplog, tmp_path,
+                                                            ticks, warned):
+    """A 2 s real-time run on a loaded host ticked 11 times per sim second at 50 Hz and
+    said nothing (an auditor's): its figures are no real-time loop's."""
+    from types import SimpleNamespace
+
+    from horizon_mpc import closed_loop, closed_loop_report
+
+    summary = {"plan_age_ms": {"median": 4.0, "p95": 6.0}, "sim_time": 2.0, "wall_time": 2.1,
+               "real_time_factor": 0.95, "ticks_per_sim_second": ticks,
+               "tick_time_ms": {"median": 5.0}, "falls": {"count": 0, "times": []},
+               "foreign_publishers": []}
+    monkeypatch.setattr(closed_loop, "run", lambda *a, **k: SimpleNamespace(interrupted=False))
+    monkeypatch.setattr(closed_loop_report, "summarise", lambda *a, **k: summary)
+    monkeypatch.setattr(closed_loop_report, "write_report", lambda *a, **k: None)
+    with caplog.at_level("WARNING", logger=closed_loop.__name__):
+        assert main(["--mode", "realtime", "--duration", "2", "--no-gif",
+                     "--out", str(tmp_path / "out")]) == 0
+    said = "the MPC ticked 11.0 times per sim second, 22 % of its 50 Hz control rate"
+    assert (said in caplog.text) == warned, caplog.text
+
+
 @pytest.mark.parametrize("argv0, prog", [
     ("/opt/ws/install/horizon_mpc/lib/horizon_mpc/closed_loop", "closed_loop"),  # ros2 run
     ("/venv/bin/closed_loop", "closed_loop"),
