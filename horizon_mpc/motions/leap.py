@@ -148,7 +148,13 @@ def build_leap(model: RobotModel, cfg: RobotConfig, st: LeapSettings) -> LeapPro
     wb.add_final_state(q_final)
     sched = leap_schedule(st, front, hind)
     wb.set_schedule(sched, floor=True)
-    trunk = trunk_points(cfg, model.pin_model)
+    trunk, why = np.zeros((0, 3)), f"{model.name} has no collision shape on its base"
+    try:
+        trunk = trunk_points(cfg, model.pin_model)
+    except FileNotFoundError as exc:  # a collision mesh the URDF names is missing
+        why = str(exc)
+    if st.trunk_clearance is not None and not len(trunk):
+        log.warning("leap: the trunk's height is not constrained: %s", why)
     if st.trunk_clearance is not None and len(trunk):
         prb.create_constraint("trunk_clearance", point_heights(q, trunk),
                               bounds=(np.full(len(trunk), st.trunk_clearance),
