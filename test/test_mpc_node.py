@@ -706,6 +706,19 @@ def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):
                            Parameter("max_vx", value=max_vx)])
 
 
+def test_use_sim_time_is_refused_live_and_its_value_kept(harness):
+    """A live use_sim_time change was accepted: every state was then stale (or stamped ahead
+    of the clock) until it was set back (sim_node refuses one). Setting the value it has is
+    no change and succeeds."""
+    h = harness()
+    was = h.node.get_parameter("use_sim_time").value
+    res = h.node.set_parameters([Parameter("use_sim_time", value=not was)])[0]
+    assert not res.successful and "restart the node" in res.reason
+    assert h.node.get_parameter("use_sim_time").value == was
+    assert h.node.get_clock().ros_time_is_active == was
+    assert h.node.set_parameters([Parameter("use_sim_time", value=was)])[0].successful
+
+
 def test_a_state_older_than_the_last_one_planned_from_is_refused(harness):
     h = harness()
     used = h.publish_state()

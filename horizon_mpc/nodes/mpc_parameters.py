@@ -326,6 +326,11 @@ class MpcParameters:
         between two ticks."""
         new = {p.name: p.value for p in params}
         for name, value in new.items():
+            if name == "use_sim_time" and value != self._p("use_sim_time"):
+                # every state would be stale, or stamped ahead, until it was set back
+                return SetParametersResult(successful=False, reason=(
+                    "use_sim_time is read at start-up (the node's clock, the states' stamps "
+                    "and the time-outs follow it): restart the node to change it"))
             if name == "gait" and value not in GAITS:
                 return SetParametersResult(successful=False,
                                            reason=f"unknown gait {value!r}; gaits: {list(GAITS)}")
