@@ -18,11 +18,17 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
+
+if TYPE_CHECKING:  # the heavy modules are imported when a motion runs
+    from horizon_mpc.config import RobotConfig
+    from horizon_mpc.model import RobotModel
+    from horizon_mpc.motions.result import MotionResult
 
 __all__ = ["MOTIONS", "main"]
 
@@ -134,7 +140,6 @@ def _main(argv: Sequence[str] | None) -> int:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     from horizon_mpc.config import load_robot_config
     from horizon_mpc.motions import leap, turn, walk
-    from horizon_mpc.motions.output import write_outputs
     from horizon_mpc.motions.settings import load_motion_config
     from horizon_mpc.motions.wholebody import robot_model
 
@@ -143,30 +148,47 @@ def _main(argv: Sequence[str] | None) -> int:
         "turn": (turn.TurnSettings, turn.run_turn),
         "walk": (walk.WalkSettings, walk.run_walk),
     }[args.motion]
-    try:  # the configs and settings: one line naming the problem, exit code 2
-        mc = load_motion_config(args.config or args.motion)
-        robot = args.robot or mc.robot
-        solver = args.solver or mc.solver
-        cfg = load_robot_config(robot)
-        settings = mc.settings_for(cls, cfg.name, _overrides(args.set))
-        out = Path(args.out or f"out/motions/{args.motion}")
-        if out.exists() and not out.is_dir():  # found before the solve, not after it
-            raise ValueError(f"--out {out} exists and is not a folder")
-        # before the folder is made: a bad locked_joints left an empty one
-        model = robot_model(cfg, getattr(settings, "locked_joints", ()))
-        made = _first_missing(out)  # removed again if nothing gets written into it
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:  # under a file, no permission: a traceback after the solve
-            raise ValueError(f"--out {out}: cannot make that folder ({exc.strerror})") from None
-        try:  # an existing folder that cannot be written: found after the solve too
-            tempfile.TemporaryFile(dir=out).close()
-        except OSError as exc:
-            raise ValueError(f"--out {out}: cannot write in that folder ({exc.strerror})") \
-                from None
-    except (ValueError, KeyError, FileNotFoundError, yaml.YAMLError) as exc:
-        print(f"motion: error: {exc}", file=sys.stderr)
-        return 2
+    out: Path | None = None
+    made: Path | None = None  # the first folder made for the outputs
+    try:  # whatever ends the run (an error, an interrupt) before anything is written in
+        # the folders made for the outputs removes them again (they were left empty)
+        try:  # the configs and settings: one line naming the problem, exit code 2
+            mc = load_motion_config(args.config or args.motion)
+            robot = args.robot or mc.robot
+            solver = args.solver or mc.solver
+            cfg = load_robot_config(robot)
+            settings = mc.settings_for(cls, cfg.name, _overrides(args.set))
+            out = Path(args.out or f"out/motions/{args.motion}")
+            if out.exists() and not out.is_dir():  # found before the solve, not after it
+                raise ValueError(f"--out {out} exists and is not a folder")
+            # before the folder is made: a bad locked_joints left an empty one
+            model = robot_model(cfg, getattr(settings, "locked_joints", ()))
+            made = _first_missing(out)
+            try:
+                out.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:  # under a file, no permission: a traceback after the solve
+                raise ValueError(f"--out {out}: cannot make that folder ({exc.strerror})") \
+                    from None
+            try:  # an existing folder that cannot be written: found after the solve too
+                tempfile.TemporaryFile(dir=out).close()
+            except OSError as exc:
+                raise ValueError(f"--out {out}: cannot write in that folder ({exc.strerror})") \
+                    from None
+        except (ValueError, KeyError, FileNotFoundError, yaml.YAMLError) as exc:
+            print(f"motion: error: {exc}", file=sys.stderr)
+            return 2
+        return _solve_and_write(args, run, cfg, model, solver, settings, out)
+    finally:
+        if out is not None:
+            _remove_empty(out, made)
+
+
+def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
+                     cfg: RobotConfig, model: RobotModel, solver: str, settings: object,
+                     out: Path) -> int:
+    """Solve the motion, replay a leap, write and print the outputs; the exit code."""
+    from horizon_mpc.motions.output import write_outputs
+
     print(f"{args.motion}: {cfg.name} ({model.nv} dof), solver {solver}")
     t0 = time.perf_counter()
     try:
@@ -174,15 +196,9 @@ def _main(argv: Sequence[str] | None) -> int:
         res = run(cfg, solver, settings, opts={"verbose": True} if args.verbose else None,
                   model=model)
     except ValueError as exc:  # settings the problem cannot be built with (n_nodes 0, ...)
-        _remove_empty(out, made)
         print(f"motion: error: cannot build the {args.motion}: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        _remove_empty(out, made)
-        raise
-    if _signals:
-        _remove_empty(out, made)
-        _checkpoint()
+    _checkpoint()
     wall = time.perf_counter() - t0
     extra = {"settings": dataclasses.asdict(settings), "wall_time": wall}
     if args.motion == "leap" and not args.no_replay:
