@@ -363,12 +363,15 @@ def test_the_urdf_importers_notes_on_what_the_loader_corrects_stay_off_stdout():
 
     code = ("import logging, sys; logging.basicConfig(level=logging.INFO, stream=sys.stderr)\n"
             "from horizon_mpc.sim import Simulator\n"
-            "for robot in ('anymal_b', 'a1', 'hyq', 'anymal_c'): Simulator(robot)\n"
+            "for robot in ('anymal_b', 'a1', 'hyq', 'anymal_c', 'centauro'): Simulator(robot)\n"
             "print('after')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=300, check=True)
     assert out.stdout == "after\n"
     assert "b3Warning" not in out.stderr
+    # CENTAURO's 9 links without <inertial>: one note, then their names; those after the
+    # first were warnings (ball1_tip, D435_*, contact_1..4)
+    assert "WARNING" not in out.stderr, out.stderr
     assert ("anymal.urdf: pybullet zeroed the inertia tensors of depth_camera_front_camera, "
             "depth_camera_rear_camera, depth_camera_left_camera, depth_camera_right_camera, "
             "hatch") in out.stderr

@@ -212,15 +212,13 @@ def _log_importer_messages(urdf: Path, said: list[str],
     (anymal_c's cameras), are named at INFO; anything else is a warning. ``inertias``:
     :func:`_link_inertias` of the URDF."""
     zeroed, other = [], []
-    skip_name = False
     for message in said:
-        if skip_name:  # the link name the note about a missing <inertial> is followed by
-            skip_name = False
-            if inertias.get(message, 0.0) is None:
-                continue
-        if message.startswith(_NO_INERTIAL):
-            skip_name = True
-        elif message.startswith(_BAD_INERTIA):
+        # the note about a missing <inertial> and the link names that follow it (the repeats
+        # of the note are gone: one note, then every such link's name; CENTAURO's 8 names
+        # after the first were warnings)
+        if message.startswith(_NO_INERTIAL) or inertias.get(message, 0.0) is None:
+            continue
+        if message.startswith(_BAD_INERTIA):
             link = message[len(_BAD_INERTIA):]
             if (inertias.get(link) or 0.0) > _NEGLIGIBLE_INERTIA:
                 zeroed.append(link)

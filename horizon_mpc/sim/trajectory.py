@@ -33,6 +33,9 @@ PLAUSIBLE = {"positions": 1e4, "velocities": 1e5, "efforts": 1e7}
 #: 20-40 rad/s); two points 1 ns apart and 0.3 rad apart asked for 3e8 rad/s, which the
 #: interpolation fed to the D term: 1000 N m, the robot launched at 100 m/s
 PLAUSIBLE_SPEED = 1e2
+#: s: a first point this close ahead of now is now (stamps are whole ns; a stamp copied
+#: from a state and read back as seconds can land an ulp or a rounding ahead of sim time)
+STAMP_RESOLUTION = 1e-9
 
 
 def _finite_array(name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
@@ -229,7 +232,7 @@ class ReferenceGenerator:
         has_v = cmd.velocities is not None
         v = np.asarray(cmd.velocities, dtype=float) if has_v else np.zeros((k, nj))
         tau = np.asarray(cmd.efforts, dtype=float) if cmd.efforts is not None else np.zeros((k, nj))
-        if times[0] > now:  # start from where the reference is now
+        if times[0] > now + STAMP_RESOLUTION:  # start from where the reference is now
             q_now, v_now, tau_now = self.reference(now)
             # that segment too must be a plausible speed (validate() sees only cmd's own):
             # one future point 1.5 ms ahead and 0.8 rad away drove solo12 at 100 rad/s
