@@ -314,6 +314,27 @@ def test_the_split_ilqr_iteration_refuses_a_changed_problem_too():
         solver.prepare()
 
 
+def test_a_manifold_declared_after_a_collocation_transcription_is_refused_at_the_build():
+    """transcribe('direct_collocation') refuses a manifold state; declared after it, the
+    build crashed inside CasADi (dimension mismatch) or, with the tangent of the state's
+    size, solved ignoring the manifold (an auditor's)."""
+    prb = Problem(5)
+    q = prb.create_state_variable("q", 1)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dt(0.1)
+    prb.transcribe("direct_collocation", degree=3)
+    a, d, b = cs.SX.sym("a", 1), cs.SX.sym("d", 1), cs.SX.sym("b", 1)
+    q.set_manifold(cs.Function("integrate", [a, d], [a + d]),
+                   cs.Function("difference", [a, b], [cs.atan2(cs.sin(b - a), cs.cos(b - a))]),
+                   1)
+    prb.set_dynamics(u)
+    prb.create_cost("effort", u - 1)
+    for solver in ("ipopt", "gnsqp"):
+        with pytest.raises(ValueError, match=r"direct_collocation supports vector-space states "
+                                             r"only; \['q'\] on a manifold"):
+            make_solver(solver, prb)
+
+
 def test_a_manifold_declared_after_the_dynamics_is_caught_at_the_build():
     prb = Problem(5)
     q = prb.create_state_variable("q", 2)
@@ -348,6 +369,25 @@ def test_nan_bounds_and_crossed_one_sided_bounds_are_refused(prb):
     con = prb.create_constraint("c", prb.get_variable("x")[0])
     with pytest.raises(ValueError, match="NaN bound"):
         con.set_bounds(np.nan, 0.0)
+
+
+def test_none_as_a_bound_is_no_bound_on_that_side(prb):
+    """None was taken as NaN and refused as a 'NaN bound' (scipy and most OCP tools read it
+    as no bound)."""
+    u = prb.get_variable("u")
+    u.set_bounds(None, 2.0)
+    np.testing.assert_array_equal(u.lower_bounds, -np.inf)
+    np.testing.assert_array_equal(u.upper_bounds, 2.0)
+    u.set_bounds(-1.0, None, nodes=[0, 1])
+    assert u.lower_bounds[0, 0] == -1.0 and u.upper_bounds[0, 1] == np.inf
+    assert u.upper_bounds[0, 2] == 2.0
+    u.set_upper_bounds(None)
+    u.set_lower_bounds(None)
+    np.testing.assert_array_equal(u.upper_bounds, np.inf)
+    np.testing.assert_array_equal(u.lower_bounds, -np.inf)
+    con = prb.create_constraint("c", prb.get_variable("x")[0], bounds=(0.0, None))
+    np.testing.assert_array_equal(con.upper_bounds, np.inf)
+    np.testing.assert_array_equal(con.lower_bounds, 0.0)
 
 
 
@@ -647,6 +687,10 @@ def test_a_dt_parameter_that_is_not_positive_is_refused_at_the_solve(prb, solver
     if solver == "ilqr":
         with pytest.raises(ValueError, match="at node 7"):
             s.prepare()
+    # node N's dt is no interval's: any value there is taken (0 there was refused)
+    values[0, 7], values[0, -1] = 0.1, 0.0
+    dt.assign(values)
+    assert s.solve()
 
 
 @pytest.mark.parametrize("name", ["ipopt", "gnsqp", "ilqr"])

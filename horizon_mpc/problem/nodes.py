@@ -117,6 +117,12 @@ def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:
                      f"{n_sel} node(s); give a scalar, ({dim},) or ({dim}, {n_sel})")
 
 
+def bound_values(value, side: float, dim: int, n_sel: int, what: str = "") -> np.ndarray:
+    """:func:`broadcast_values` of a bound, None being no bound (``side``: -inf for a lower
+    bound, inf for an upper one; it was taken as a NaN bound and refused)."""
+    return broadcast_values(side if value is None else value, dim, n_sel, what)
+
+
 def check_bounds(lo: np.ndarray, hi: np.ndarray, what: str) -> None:
     """Raise ValueError when a bound is NaN (no bound is -inf/inf; a NaN bound would be
     ignored by some solvers and enforced by others), a lower bound is +inf or an upper

@@ -252,9 +252,7 @@ class Problem:
         if method == "direct_collocation":
             if not isinstance(degree, (int, np.integer)) or not 1 <= degree <= 9:
                 raise ValueError(f"collocation degree must be an int in 1..9, got {degree!r}")
-            if any(v.manifold for v in self.states):
-                raise ValueError("direct_collocation supports vector-space states only; "
-                                 "use multiple_shooting for states on a manifold")
+            self.check_transcription(method)
         self._integrator = get_integrator(integrator)
         self.integrator_name = integrator if isinstance(integrator, str) else "custom"
         self.transcription = method
@@ -329,6 +327,17 @@ class Problem:
         return cs.Function("dt", [self.s, self.p], [cs.SX(dt) if isinstance(dt, float) else dt],
                            ["s", "p"], ["dt"])
 
+    def check_transcription(self, method: str | None = None) -> None:
+        """ValueError when the transcription (``method``, default the problem's) cannot take
+        the states: direct collocation sums states as vectors, so none may be on a manifold
+        (checked by :meth:`transcribe` and again when a solver is built: a manifold declared
+        after ``transcribe`` crashed inside CasADi, or was silently ignored)."""
+        method = self.transcription if method is None else method
+        if method == "direct_collocation" and any(v.manifold for v in self.states):
+            names = [v.name for v in self.states if v.manifold]
+            raise ValueError(f"direct_collocation supports vector-space states only; {names} "
+                             "on a manifold: use multiple_shooting")
+
     def check_dt_values(self) -> None:
         """ValueError when dt, an expression of parameters, is not a finite number > 0 on
         some node with the parameters' current values (``set_dt`` checks a constant; what
@@ -338,7 +347,9 @@ class Problem:
         dt = self._dt
         if dt is None or isinstance(dt, float) or cs.depends_on(dt, self.s):
             return
-        values = np.asarray(self.dt_function()(np.zeros(self.ns), self.parameter_values()))
+        # interval k takes dt of node k: node N's value is never used
+        values = np.asarray(self.dt_function()(np.zeros(self.ns),
+                                                self.parameter_values()[:, :-1]))
         bad = np.flatnonzero(~(np.isfinite(values) & (values > 0)).ravel())
         if bad.size:
             k = int(bad[0])

@@ -20,7 +20,7 @@ from horizon_mpc.codegen import function_name
 from horizon_mpc.problem.nodes import (
     NodeSelection,
     Values,
-    broadcast_values,
+    bound_values,
     check_bounds,
     select_nodes,
 )
@@ -147,12 +147,13 @@ class Constraint(Term):
             self.set_bounds(*bounds, nodes=chosen if per_active else None)
 
     def set_bounds(self, lb: Values, ub: Values, nodes: NodeSelection = None) -> None:
-        """Set the bounds on ``nodes`` (None: all nodes); scalar, (dim,) or (dim, n_sel)."""
+        """Set the bounds on ``nodes`` (None: all nodes); scalar, (dim,) or (dim, n_sel), None
+        for no bound on that side."""
         idx = (np.arange(self.n_nodes + 1) if nodes is None
                else select_nodes(nodes, self.n_nodes + 1, f"constraint {self.name!r}",
                                  ordered=True))
-        lo = broadcast_values(lb, self.dim, idx.size, f"lower bound of {self.name!r}")
-        hi = broadcast_values(ub, self.dim, idx.size, f"upper bound of {self.name!r}")
+        lo = bound_values(lb, -np.inf, self.dim, idx.size, f"lower bound of {self.name!r}")
+        hi = bound_values(ub, np.inf, self.dim, idx.size, f"upper bound of {self.name!r}")
         check_bounds(lo, hi, f"constraint {self.name!r}")
         self._lb[:, idx], self._ub[:, idx] = lo, hi
         self.revision = self.bounds_revision = next(_REVISIONS)

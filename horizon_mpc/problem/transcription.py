@@ -106,6 +106,7 @@ class Transcription:
             raise ValueError(f"constraint_rows must be 'valid' or 'active', got "
                              f"{constraint_rows!r}")
         prb.finalize()
+        prb.check_transcription()
         self.prb = prb
         self.sym = sym
         self.method = prb.transcription

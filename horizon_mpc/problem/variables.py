@@ -18,6 +18,7 @@ import numpy as np
 from horizon_mpc.problem.nodes import (
     NodeSelection,
     Values,
+    bound_values,
     broadcast_values,
     check_bounds,
     select_nodes,
@@ -83,8 +84,8 @@ class Variable(cs.SX):
                            ordered=True)
         return idx, idx.size
 
-    def _values(self, value, n: int, what: str) -> np.ndarray:
-        return broadcast_values(value, self.dim, n, f"{what} of {self.name!r}")
+    def _bound_values(self, value, side: float, n: int, what: str) -> np.ndarray:
+        return bound_values(value, side, self.dim, n, f"{what} of {self.name!r}")
 
     def _write(self, target: np.ndarray, cols: slice | np.ndarray, n: int, value,
                what: str) -> None:
@@ -97,18 +98,20 @@ class Variable(cs.SX):
             arr = arr[:, None]
         elif not (arr.ndim == 0 or (arr.ndim == 2 and arr.shape[0] == self.dim
                                     and arr.shape[1] in (1, n))):
-            self._values(value, n, what)  # raises the shape error
+            broadcast_values(value, self.dim, n, f"{what} of {self.name!r}")  # shape error
         target[:, cols] = arr
 
     def set_bounds(self, lb: Values, ub: Values, nodes: NodeSelection = None) -> None:
-        """Set lower and upper bounds on ``nodes`` (scalar, (dim,) or (dim, n_sel)).
+        """Set lower and upper bounds on ``nodes`` (scalar, (dim,) or (dim, n_sel); None: no
+        bound on that side).
 
         Raises:
             ValueError: a bound is NaN (no bound is -inf/inf), or a lower bound is above
                 its upper bound, or a shape does not fit.
         """
         cols, n = self._columns(nodes)
-        lo, hi = self._values(lb, n, "lower bound"), self._values(ub, n, "upper bound")
+        lo = self._bound_values(lb, -np.inf, n, "lower bound")
+        hi = self._bound_values(ub, np.inf, n, "upper bound")
         check_bounds(lo, hi, f"bounds of {self.name!r}")
         self._lb[:, cols], self._ub[:, cols] = lo, hi
 
@@ -116,7 +119,7 @@ class Variable(cs.SX):
         """Set the lower bounds only (checked as :meth:`set_bounds` against the upper
         bounds in place)."""
         cols, n = self._columns(nodes)
-        lo = self._values(lb, n, "lower bound")
+        lo = self._bound_values(lb, -np.inf, n, "lower bound")
         check_bounds(lo, self._ub[:, cols], f"bounds of {self.name!r}")
         self._lb[:, cols] = lo
 
@@ -124,7 +127,7 @@ class Variable(cs.SX):
         """Set the upper bounds only (checked as :meth:`set_bounds` against the lower
         bounds in place)."""
         cols, n = self._columns(nodes)
-        hi = self._values(ub, n, "upper bound")
+        hi = self._bound_values(ub, np.inf, n, "upper bound")
         check_bounds(self._lb[:, cols], hi, f"bounds of {self.name!r}")
         self._ub[:, cols] = hi
 
