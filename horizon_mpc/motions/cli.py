@@ -10,6 +10,7 @@ overrides one (the value is read as YAML: ``--set velocity=[0.2,0,0]``).
 
 from __future__ import annotations
 
+import _thread
 import argparse
 import dataclasses
 import logging
@@ -100,17 +101,27 @@ INTERRUPTED = 130
 
 
 _signals: list[int] = []  # the SIGINT/SIGTERM received (see _checkpoint)
+_ending: list[bool] = []  # main is ending the run: a signal's exception is not wanted now
+#: s after a signal when its KeyboardInterrupt is raised again, if the run still goes on
+RAISE_AGAIN = 0.5
 
 
 def _interrupt(signum: int, *_: object) -> None:
     _signals.append(signum)
+    if _ending:
+        return
+    if len(_signals) == 1:
+        # raised while Python compiles a module it imports (no .pyc files), the exception
+        # vanishes: a leap interrupted in its first second was solved and written. The
+        # same signal again a moment later, unless main is ending the run by then
+        again = threading.Timer(RAISE_AGAIN, _thread.interrupt_main, (signal.SIGTERM,))
+        again.daemon = True
+        again.start()
     raise KeyboardInterrupt
 
 
 def _checkpoint() -> None:
-    """KeyboardInterrupt if a signal came and its exception was lost on the way (raised
-    while Python compiled a module it imported, without .pyc files, it vanishes: a leap
-    interrupted in its first second was solved and written)."""
+    """KeyboardInterrupt if a signal came and its exception was lost on the way."""
     if _signals:
         raise KeyboardInterrupt
 
@@ -121,17 +132,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     arguments or settings; 130: interrupted by SIGINT or SIGTERM, one line and no
     traceback; the outputs not written, or not all of them)."""
     _signals.clear()
+    _ending.clear()
+    previous = {}
     if threading.current_thread() is threading.main_thread():
         # also when started with SIGINT ignored (a background job of a non-interactive
-        # shell); SIGTERM (a supervisor, `timeout`) as Ctrl-C
-        signal.signal(signal.SIGINT, _interrupt)
-        signal.signal(signal.SIGTERM, _interrupt)
+        # shell); SIGTERM (a supervisor, `timeout`) as Ctrl-C; the caller's handlers back
+        # on return (main called in a process of its own making, e.g. a test)
+        previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT,
+                                                                     signal.SIGTERM)}
     try:
         return _main(argv)
     except KeyboardInterrupt:
+        _ending.append(True)
         print("motion: interrupted (the outputs are not written, or not all of them)",
               file=sys.stderr)
         return INTERRUPTED
+    finally:
+        _ending.append(True)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def _main(argv: Sequence[str] | None) -> int:
