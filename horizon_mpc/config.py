@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import difflib
+import logging
 import math
 import os
 import sys
@@ -35,6 +35,8 @@ import yaml
 
 __all__ = ["RobotConfig", "SimGains", "check_settings", "config_dirs", "field_default",
            "find_config_file", "load_robot_config", "read_yaml"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -241,15 +243,31 @@ def _sim_gains(path: Path, sim: dict) -> SimGains:
     return SimGains(**out)
 
 
+def _edits(a: str, b: str) -> int:
+    """Edits (insert, delete, substitute, swap two neighbours) that turn ``a`` into ``b``."""
+    d = [[i + j if i * j == 0 else 0 for j in range(len(b) + 1)] for i in range(len(a) + 1)]
+    for i in range(1, len(a) + 1):
+        for j in range(1, len(b) + 1):
+            d[i][j] = min(d[i - 1][j] + 1, d[i][j - 1] + 1,
+                          d[i - 1][j - 1] + (a[i - 1] != b[j - 1]))
+            if i > 1 and j > 1 and a[i - 1] == b[j - 2] and a[i - 2] == b[j - 1]:
+                d[i][j] = min(d[i][j], d[i - 2][j - 2] + 1)
+    return d[len(a)][len(b)]
+
+
 def _check_top_level_keys(path: Path, data: dict) -> None:
-    """A key that is neither a known setting nor a section: refused, with the nearest known
-    one (a misspelt ``mcp:`` section was ignored and the defaults used without a word)."""
+    """A key that is neither a known setting nor a section: refused when it is close to a
+    known one (a misspelt ``mcp:`` section was ignored and the defaults used without a
+    word), else ignored with a warning (a user's own note, ``description:``)."""
     known = sorted(_KNOWN | set(SECTIONS))
     unknown = sorted(str(k) for k in data if k not in _KNOWN and k not in SECTIONS)
+    typos = {k: near[0] for k in unknown
+             if (near := [n for n in known if _edits(k, n) <= max(1, len(n) // 4)])}
+    if typos:
+        hints = ", ".join(f"{k!r} (did you mean {v!r}?)" for k, v in typos.items())
+        raise ValueError(f"{path}: unknown key(s) {hints}; known: {known}")
     if unknown:
-        hints = [f"{k!r} (did you mean {close[0]!r}?)" if (close := difflib.get_close_matches(
-            k, known, n=1)) else repr(k) for k in unknown]
-        raise ValueError(f"{path}: unknown key(s) {', '.join(hints)}; known: {known}")
+        log.warning("%s: unknown key(s) %s ignored (known: %s)", path, unknown, known)
 
 
 def load_robot_config(name_or_path: str | Path) -> RobotConfig:

@@ -186,6 +186,14 @@ def test_a_config_value_of_the_wrong_kind_is_one_error_naming_file_and_key(tmp_p
     assert "mine.yaml" in str(err.value)
 
 
+def test_a_key_far_from_any_known_one_is_ignored_with_a_warning(tmp_path, caplog):
+    """A user's own note in a config (not a typo of a known key) does not stop the robot."""
+    with caplog.at_level("WARNING", logger="horizon_mpc.config"):
+        cfg = _config(tmp_path, _GO2 + "description: my quadruped\n")
+    assert cfg.robot == "go2"
+    assert "unknown key(s) ['description'] ignored" in caplog.text
+
+
 def test_per_joint_gains_in_the_config_reach_the_simulator(tmp_path):
     """doc/simulator.md: the sim gains are a number or one per joint (a list was a
     TypeError traceback in every executable)."""
