@@ -20,6 +20,7 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull, QhullError
 
 from horizon_mpc.config import RobotConfig
+from horizon_mpc.model.spatial import quat_to_rot
 from horizon_mpc.posture import config_urdf_path
 from horizon_mpc.sim.loading import resolve_mesh_uris
 
@@ -66,6 +67,5 @@ def trunk_points(cfg: RobotConfig, pin_model: pin.Model) -> np.ndarray:
 def point_heights(q: cs.SX | np.ndarray, points: np.ndarray) -> cs.SX | np.ndarray:
     """World heights (k,) of ``points`` (k, 3, base joint frame) at configuration ``q``
     (base position, then Pinocchio's quaternion x, y, z, w): symbolic for a CasADi ``q``."""
-    x, y, z, w = q[3], q[4], q[5], q[6]
-    row = [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]
-    return q[2] + row[0] * points[:, 0] + row[1] * points[:, 1] + row[2] * points[:, 2]
+    heights = q[2] + cs.mtimes(points, quat_to_rot(q[3:7])[2, :].T)
+    return heights if isinstance(heights, (cs.SX, cs.MX)) else np.asarray(heights).ravel()

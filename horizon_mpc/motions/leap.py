@@ -153,12 +153,12 @@ def build_leap(model: RobotModel, cfg: RobotConfig, st: LeapSettings) -> LeapPro
         trunk = trunk_points(cfg, model.pin_model)
     except FileNotFoundError as exc:  # a collision mesh the URDF names is missing
         why = str(exc)
-    if st.trunk_clearance is not None and not len(trunk):
-        log.warning("leap: the trunk's height is not constrained: %s", why)
     if st.trunk_clearance is not None and len(trunk):
         prb.create_constraint("trunk_clearance", point_heights(q, trunk),
                               bounds=(np.full(len(trunk), st.trunk_clearance),
                                       np.full(len(trunk), np.inf)))
+    elif st.trunk_clearance is not None:
+        log.warning("leap: the trunk's height is not constrained: %s", why)
 
     diff = model.difference()(q0, q)
 
@@ -222,8 +222,7 @@ def leap_summary(res: MotionResult, lp: LeapProblem, model: RobotModel) -> dict:
     limit = model.joint_effort_limit
     out["max_torque_ratio"] = float(np.max(np.abs(res.tau[6:]) / limit[:, None]))
     # the trunk's lowest point on the nodes (m; null without collision shapes)
-    out["min_trunk_height"] = (float(min(point_heights(res.q[:, k], lp.trunk).min()
-                                         for k in range(res.q.shape[1])))
+    out["min_trunk_height"] = (float(min(point_heights(qk, lp.trunk).min() for qk in res.q.T))
                                if len(lp.trunk) else None)
     dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
     out["max_dynamics_defect"] = dyn["max_defect"]

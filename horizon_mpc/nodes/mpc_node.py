@@ -281,11 +281,14 @@ class MpcNode(MpcParameters, Node):
         # subscription never received a joystick driver's sensor-data cmd_vel; the robot
         # stood with diagnostics OK)
         cmd_qos = QoSProfile(depth=10, reliability=_RELIABILITY[self._p("cmd_reliability")])
+        # each input with the parameter that sets its reliability (_check_input_types)
         self._inputs = (
-            self.create_subscription(JointState, "joint_states", self._on_joint_state,
-                                     state_qos),
-            self.create_subscription(Odometry, "odom", self._on_odom, state_qos),
-            self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, cmd_qos))
+            (self.create_subscription(JointState, "joint_states", self._on_joint_state,
+                                      state_qos), "state_reliability"),
+            (self.create_subscription(Odometry, "odom", self._on_odom, state_qos),
+             "state_reliability"),
+            (self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, cmd_qos),
+             "cmd_reliability"))
         accept_integers_for_floats(self)  # ros2 param set /mpc max_vx 1
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if self.trigger == "timer":
@@ -387,7 +390,7 @@ class MpcNode(MpcParameters, Node):
         """Say (once each) which publishers on an input topic send another message type, a
         TwistStamped cmd_vel above all (Jazzy's teleop and nav2 can publish those): DDS
         never connects the two and nothing else says so; the robot just stands."""
-        for sub, parameter in zip(self._inputs, _RELIABILITY_PARAMETER, strict=True):
+        for sub, parameter in self._inputs:
             ours = message_type_name(sub.msg_type)
             for info in self.get_publishers_info_by_topic(sub.topic_name):
                 # a publisher's node is named once discovery has caught up
@@ -817,8 +820,6 @@ class MpcNode(MpcParameters, Node):
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE,
                 "best_effort": ReliabilityPolicy.BEST_EFFORT}
-# the parameter that sets the reliability of each input (joint_states, odom, cmd_vel)
-_RELIABILITY_PARAMETER = ("state_reliability", "state_reliability", "cmd_reliability")
 
 
 #: s: a state this much older than the node's clock is on another clock (sim time against
