@@ -411,6 +411,22 @@ def test_pinocchio_dynamics_reproduce_the_states_and_the_base_wrench_vanishes(mo
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("motion", ["leap", "turn", "walk"])
+def test_every_motion_summary_has_the_physics_checks(motion, request):
+    res, _, model, *_ = request.getfixturevalue(motion)
+    s = res.summary
+    ratio = np.abs(res.tau[6:]) / model.joint_effort_limit[:, None]
+    # at most the limit, to the solver's constraint tolerance (the turn: 1 + 5e-11)
+    assert s["max_torque_ratio"] == pytest.approx(ratio.max())
+    assert 0 < s["max_torque_ratio"] <= 1 + 1e-8
+    check = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
+    assert s["max_dynamics_defect"] == check["max_defect"]
+    assert s["max_base_wrench"] == check["max_base_wrench"]
+    # the loaded feet's figures for the NLP motions (the walk's states are MPC ticks)
+    assert ("max_loaded_foot_slip" in s) == (motion != "walk")
+
+
+@pytest.mark.slow
 def test_dynamics_check_sees_a_state_off_the_dynamics_and_an_unbalanced_base(leap):
     res, _, model, _ = leap
     q, v, a = res.q.copy(), res.v.copy(), res.a.copy()

@@ -28,6 +28,7 @@ __all__ = [
     "flight_phases",
     "foot_heights",
     "loaded",
+    "physics_summary",
     "roll_pitch_yaw",
     "swing_intervals",
 ]
@@ -93,6 +94,21 @@ def dynamics_check(res: MotionResult, model: pin.Model, foot_radius: float = 0.0
     return {"max_defect": float(defect.max(initial=0.0)),
             "max_base_wrench": float(np.abs(wrench).max(initial=0.0)),
             "defect": defect, "base_wrench": wrench, "tau": taus}
+
+
+def physics_summary(res: MotionResult, model: RobotModel, contacts: bool = True) -> dict:
+    """The summary figures every motion reports from its checks against numeric Pinocchio:
+    ``max_torque_ratio`` (largest joint torque over its effort limit), ``max_dynamics_defect``
+    and ``max_base_wrench`` (:func:`dynamics_check`) and, with ``contacts``, the figures of
+    :func:`contact_check`."""
+    out = {"max_torque_ratio": float(np.max(np.abs(res.tau[6:])
+                                            / model.joint_effort_limit[:, None]))}
+    dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
+    out["max_dynamics_defect"] = dyn["max_defect"]
+    out["max_base_wrench"] = dyn["max_base_wrench"]
+    if contacts:
+        out.update(contact_check(res, model.pin_model))
+    return out
 
 
 #: m: a loaded foot may leave the ground or slide by this much within an interval (rolling

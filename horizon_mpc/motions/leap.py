@@ -19,10 +19,9 @@ from horizon_mpc.model import RobotModel
 from horizon_mpc.motions.analysis import (
     best_overlap,
     check_contacts,
-    contact_check,
-    dynamics_check,
     flight_phases,
     loaded,
+    physics_summary,
 )
 from horizon_mpc.motions.body import point_heights, trunk_points
 from horizon_mpc.motions.result import MotionResult
@@ -219,15 +218,10 @@ def leap_summary(res: MotionResult, lp: LeapProblem, model: RobotModel) -> dict:
         out["hind_lift_off"] = [last_before(i) for i in lp.hind]
         out["front_touchdown"] = [first_after(i) for i in lp.front]
         out["hind_touchdown"] = [first_after(i) for i in lp.hind]
-    limit = model.joint_effort_limit
-    out["max_torque_ratio"] = float(np.max(np.abs(res.tau[6:]) / limit[:, None]))
     # the trunk's lowest point on the nodes (m; null without collision shapes)
     out["min_trunk_height"] = (float(min(point_heights(qk, lp.trunk).min() for qk in res.q.T))
                                if len(lp.trunk) else None)
-    dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
-    out["max_dynamics_defect"] = dyn["max_defect"]
-    out["max_base_wrench"] = dyn["max_base_wrench"]
-    out.update(contact_check(res, model.pin_model))
+    out.update(physics_summary(res, model))
     return out
 
 

@@ -19,9 +19,8 @@ from horizon_mpc.locomotion import ContactSchedule, base_rotation
 from horizon_mpc.model import RobotModel
 from horizon_mpc.motions.analysis import (
     check_contacts,
-    contact_check,
-    dynamics_check,
     foot_heights,
+    physics_summary,
     roll_pitch_yaw,
     swing_intervals,
 )
@@ -179,12 +178,7 @@ def turn_summary(res: MotionResult, tp: TurnProblem, model: RobotModel,
     out["swings_per_foot"] = [len(s) for s in swings]
     out["swing_apex"] = [[float(z[i, a:b].max()) for a, b in s] for i, s in enumerate(swings)]
     out["step_height"] = st.step_height
-    out["max_torque_ratio"] = float(np.max(np.abs(res.tau[6:])
-                                           / model.joint_effort_limit[:, None]))
-    dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
-    out["max_dynamics_defect"] = dyn["max_defect"]
-    out["max_base_wrench"] = dyn["max_base_wrench"]
-    out.update(contact_check(res, model.pin_model))
+    out.update(physics_summary(res, model))
     return out
 
 

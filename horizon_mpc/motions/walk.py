@@ -24,7 +24,7 @@ from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings, WalkingProblem, build_walking_problem, make_gait
 from horizon_mpc.locomotion.pose_reference import advance_pose, base_yaw, horizon_poses
 from horizon_mpc.model import RobotModel
-from horizon_mpc.motions.analysis import dynamics_check, foot_heights, swing_intervals
+from horizon_mpc.motions.analysis import foot_heights, physics_summary, swing_intervals
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import touchdown_nodes
 from horizon_mpc.motions.settings import check_settings
@@ -290,7 +290,5 @@ def walk_summary(res: MotionResult, period: float, st: WalkSettings,
               for a, b in runs if b > a]
     out["swing_apex"] = [min(apexes), max(apexes)] if apexes else None
     out["step_height"] = float(step_height)
-    dyn = dynamics_check(res, model.pin_model, res.foot_radius, res.integrator)
-    out["max_dynamics_defect"] = dyn["max_defect"]
-    out["max_base_wrench"] = dyn["max_base_wrench"]
+    out.update(physics_summary(res, model, contacts=False))
     return out
