@@ -196,6 +196,39 @@ def test_unsupported_joint_type_is_rejected():
         RobotModel.from_urdf(urdf, floating_base=False)
 
 
+def test_a_one_axis_joint_of_another_type_is_refused():
+    """A composite joint of one degree of freedom has a motion axis like a revolute one:
+    its inner placement was dropped and its kinematics wrong, silently (a QA finding)."""
+    model = pin.Model()
+    joint = pin.JointModelComposite(pin.JointModelRX(),
+                                    pin.SE3(pin.utils.rotate("y", 0.7), np.ones(3)))
+    j = model.addJoint(0, joint, pin.SE3.Identity(), "comp")
+    model.appendBodyToJoint(j, pin.Inertia.Random(), pin.SE3.Identity())
+    with pytest.raises(NotImplementedError, match="JointModelComposite is not supported"):
+        RobotModel(model)
+
+
+def test_mimic_joints_are_named_in_a_warning(caplog):
+    """Pinocchio's URDF parser makes a mimic joint an independent one: said, not silent."""
+    link = ('<link name="{}"><inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" '
+            'ixy="0" ixz="0" iyz="0"/></inertial></link>')
+    joint = ('<joint name="{}" type="revolute"><parent link="{}"/><child link="{}"/>'
+             '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>{}'
+             '</joint>')
+    urdf = ('<robot name="r">' + "".join(link.format(x) for x in "abc")
+            + joint.format("j1", "a", "b", "")
+            + joint.format("j2", "b", "c", '<mimic joint="j1" multiplier="2"/>') + "</robot>")
+    with caplog.at_level("WARNING", logger="horizon_mpc.model.loading"):
+        m = RobotModel.from_urdf(urdf, floating_base=False)
+    assert m.joint_names == ["j1", "j2"]
+    assert "mimic joints become independent joints of the model (j2 mimics j1)" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="horizon_mpc.model.loading"):
+        RobotModel.from_urdf(urdf.replace('<mimic joint="j1" multiplier="2"/>', ""),
+                             floating_base=False)
+    assert "mimic" not in caplog.text
+
+
 @pytest.mark.parametrize("name", ROBOTS)
 def test_every_frame_gets_a_validly_named_function(name):
     # Function names are C symbols: frame names with dots, dashes or "__" must still work.

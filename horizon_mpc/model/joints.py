@@ -98,6 +98,13 @@ class JointSpec:
         return (axis, zero) if self.kind == _PRISMATIC else (zero, axis)
 
 
+#: Pinocchio's joints of one axis (the URDF loader's revolute, continuous and prismatic)
+_ONE_AXIS_JOINTS = frozenset(
+    [f"JointModel{kind}{axis}" for kind in ("R", "P", "RUB") for axis in "XYZ"]
+    + ["JointModelRevoluteUnaligned", "JointModelRevoluteUnboundedUnaligned",
+       "JointModelPrismaticUnaligned"])
+
+
 def _classify(jmodel: pin.JointModel, name: str = "") -> tuple[str, np.ndarray]:
     """Kind and axis of a Pinocchio joint, read from its motion subspace.
 
@@ -108,7 +115,9 @@ def _classify(jmodel: pin.JointModel, name: str = "") -> tuple[str, np.ndarray]:
     short = jmodel.shortname()
     if short == "JointModelFreeFlyer":
         return _FREE_FLYER, np.zeros(3)
-    if jmodel.nv != 1 or short.startswith(("JointModelMimic", "JointModelHelical")):
+    # by name: a composite (or any other) joint of one degree of freedom has a motion axis
+    # too, and its inner placements would be dropped without a word
+    if short not in _ONE_AXIS_JOINTS:
         raise NotImplementedError(
             f"joint type {short} is not supported; supported: free-flyer root, revolute, "
             "prismatic and continuous joints (see horizon_mpc.model.joints)"

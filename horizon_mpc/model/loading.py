@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import re
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -53,6 +54,7 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
             error = exc
     if model is not None:
         _check_root(model, floating_base, source)
+        _warn_mimic_joints(urdf if is_xml else path.read_text(errors="replace"), source)
         return model
     # urdfdom prints the reason (a joint without limits, an unknown link) on stderr and
     # raises "does not contain a valid URDF model" only
@@ -75,6 +77,21 @@ def _stderr_captured() -> Iterator[list[str]]:
         if out.text:
             sys.stderr.write(out.text)
         lines.extend(out.text.splitlines())
+
+
+_MIMIC = re.compile(r"<joint\b[^>]*?\bname\s*=\s*[\"']([^\"']*)[\"'](?:(?!</joint>).)*?"
+                    r"<mimic\b[^>]*?\bjoint\s*=\s*[\"']([^\"']*)[\"']", re.S)
+
+
+def _warn_mimic_joints(text: str, source: str) -> None:
+    """Warn about URDF mimic joints: Pinocchio's URDF parser (as used here) makes each one
+    an independent, actuated degree of freedom, and nothing in the model couples it to the
+    joint it mimics."""
+    pairs = _MIMIC.findall(text)
+    if pairs:
+        log.warning("%s: mimic joints become independent joints of the model (%s); couple "
+                    "them in your problem if they must move together", source,
+                    ", ".join(f"{j} mimics {m}" for j, m in pairs))
 
 
 def _check_root(model: pin.Model, floating_base: bool, source: str) -> None:
