@@ -1934,6 +1934,50 @@ def test_a_publishers_fixed_layout_is_said_once_repairs_stay_throttled(context, 
         node.destroy_node()
 
 
+def test_a_layout_that_changes_per_message_is_throttled_and_its_names_clipped(
+        context, walking_mpc, monkeypatch):
+    """Extra joint names and odometry child frames that change from message to message made
+    one 'said once' line each (757 lines in 2 s in an auditor's run, and a key kept per
+    message); 200 000 extra names made one 2 MB line. Past ONCE_KEYS different ones the
+    kind is throttled, and a note lists NAMES_SHOWN names."""
+    from horizon_mpc.nodes.mpc_inputs import NAMES_SHOWN
+    from horizon_mpc.nodes.mpc_node import ONCE_KEYS
+
+    node = sim_time_node(context, walking_mpc)
+    log = _Logger()
+    monkeypatch.setattr(node, "get_logger", lambda: log)
+    try:
+        _, q = standing_configuration(walking_mpc.cfg)
+        zeros = np.zeros(3)
+        for k in range(50):
+            stamp = time_from_ns(10 * NS_PER_S + k * 20_000_000)
+            node._on_joint_state(joint_state_to_msg(stamp, [*node.joint_names, f"grip_{k}"],
+                                                    np.append(q[7:], 0.0),
+                                                    np.zeros(len(q) - 6)))
+            odom = odometry_to_msg(stamp, q[:3], q[3:7], zeros, zeros)
+            odom.child_frame_id = f"imu_{k}"
+            node._on_odom(odom)
+        extra = [w for w in log.warnings if "grip_" in w]
+        frames = [w for w in log.warnings if "child_frame_id" in w]
+        # ONCE_KEYS said once, then one throttled line (no wall time passed)
+        assert len(extra) == len(frames) == ONCE_KEYS + 1, log.warnings
+        assert "throttled" in extra[-1] and "throttled" in frames[-1]
+        assert sum(len(v) for v in node._said_once.values()) == 2 * ONCE_KEYS
+        many = [f"j{i:06d}_" + "x" * 100 for i in range(200_000)]
+        node._on_joint_state(joint_state_to_msg(
+            time_from_ns(12 * NS_PER_S), [*node.joint_names, *many],
+            np.append(q[7:], np.zeros(len(many))), np.zeros(len(q) - 7 + len(many))))
+        node._last_warn.clear()
+        node._on_joint_state(joint_state_to_msg(
+            time_from_ns(12 * NS_PER_S + 20_000_000), [*node.joint_names, *many],
+            np.append(q[7:], np.zeros(len(many))), np.zeros(len(q) - 7 + len(many))))
+        line = log.warnings[-1]
+        assert f"and {len(many) - NAMES_SHOWN} more" in line and len(line) < 2000, line[:300]
+        assert node.rejected["joint_states"] == 0
+    finally:
+        node.destroy_node()
+
+
 @pytest.mark.parametrize("reliability", ["best_effort", "reliable"])
 def test_cmd_vel_from_a_best_effort_publisher_is_heard_by_default_else_named(
         context, walking_mpc, monkeypatch, reliability):

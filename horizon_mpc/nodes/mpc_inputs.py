@@ -24,8 +24,10 @@ __all__ = [
     "ABSURD_COMMAND",
     "JOINT_LIMIT_MARGIN",
     "QUATERNION_TOLERANCE",
+    "NAMES_SHOWN",
     "LayoutNote",
     "base_from_odometry",
+    "clipped",
     "command_from_twist",
     "joints_from_joint_state",
 ]
@@ -75,6 +77,17 @@ def command_from_twist(
     return np.array(cmd), notes
 
 
+#: names a note lists at most, each clipped to NAME_CHARS characters (a message with 200 000
+#: extra joints made one 2 MB log line)
+NAMES_SHOWN = 8
+NAME_CHARS = 64
+
+
+def clipped(name: str, limit: int = NAME_CHARS) -> str:
+    """``name``, cut to ``limit`` characters with an ellipsis (for log lines)."""
+    return name if len(name) <= limit else name[:limit - 3] + "..."
+
+
 class LayoutNote(str):
     """A note on how a publisher lays out its messages (joints the model does not have),
     the same in every message: worth saying once, not every few seconds."""
@@ -106,7 +119,10 @@ def _name_match(names: tuple[str, ...], joint_names: tuple[str, ...]) -> tuple[
     notes = []
     extra = sorted(set(names) - set(joint_names))
     if extra:
-        notes.append(LayoutNote(f"JointState joints {extra} are not in the model; ignored"))
+        shown = [clipped(n) for n in extra[:NAMES_SHOWN]]
+        more = f" and {len(extra) - NAMES_SHOWN} more" if len(extra) > NAMES_SHOWN else ""
+        notes.append(LayoutNote(f"JointState joints {shown}{more} are not in the model; "
+                                "ignored"))
     idx = np.array([index[n] for n in joint_names], dtype=int)
     idx.flags.writeable = False  # shared by every call with these names
     return idx, notes

@@ -41,6 +41,7 @@ from horizon_mpc.nodes.declare import accept_integers_for_floats, parameter_over
 from horizon_mpc.nodes.mpc_inputs import (
     LayoutNote,
     base_from_odometry,
+    clipped,
     command_from_twist,
     joints_from_joint_state,
 )
@@ -69,6 +70,9 @@ from horizon_mpc.nodes.throttling import problem_kind
 __all__ = ["MpcNode", "main", "robot_model"]
 
 _WARN_PERIOD = 2.0  # s (wall) between two warnings of the same kind
+#: different texts of one kind said once each (a publisher's layout) before the rest of that
+#: kind is throttled instead (a layout that changes per message)
+ONCE_KEYS = 8
 _WATCH_PERIOD = 2.0  # s (wall): states arriving this long without a tick get explained
 #: a plan's constraint violation (its rows are mostly N and N m: the base wrench, friction)
 #: beyond which its diagnostics say WARN, as a fraction of the robot's weight (m g): walking
@@ -179,7 +183,7 @@ class MpcNode(MpcParameters, Node):
         self.last_state_age = math.nan
         self._last_warn: dict[str, float] = {}
         self._suppressed: dict[str, int] = {}
-        self._said_once: set[str] = set()
+        self._said_once: dict[str, set[str]] = {}  # keys said once, per kind
         # odometry twists are in child_frame_id (REP 105): the base link's, or its root
         # body's when the config names a link fixed to it (a1: trunk on base)
         self._base_frames = {mpc.cfg.base_link, mpc.model.root_link}
@@ -326,16 +330,24 @@ class MpcNode(MpcParameters, Node):
         self._last_warn[kind] = wall
         self.get_logger().warning(text + (f" ({n} similar warnings suppressed)" if n else ""))
 
-    def _warn_once(self, text: str, key: str | None = None) -> None:
-        """A warning said once per distinct ``key`` (default: the text)."""
+    def _warn_once(self, kind: str, text: str, key: str | None = None) -> None:
+        """A warning said once per distinct ``key`` (default: the text) of its ``kind``; past
+        :data:`ONCE_KEYS` different keys of one kind (a layout that changes from message
+        to message) throttled per kind like :meth:`_warn` (each was a line, and a key
+        kept, per message)."""
         key = text if key is None else key
-        if key not in self._said_once:
-            self._said_once.add(key)
+        seen = self._said_once.setdefault(kind, set())
+        if key in seen:
+            return
+        if len(seen) < ONCE_KEYS:
+            seen.add(key)
             self.get_logger().warning(text + " (said once)")
+        else:
+            self._warn(kind, text + f" (more than {ONCE_KEYS} different ones: throttled)")
 
     def _note(self, topic: str, note: str) -> None:
         if isinstance(note, LayoutNote):
-            self._warn_once(note)
+            self._warn_once(f"{topic}_layout", note)
         else:
             self._warn(problem_kind(f"{topic}_note", note), note)
 
@@ -397,13 +409,15 @@ class MpcNode(MpcParameters, Node):
                 who = ("a node" if "_UNKNOWN_" in info.node_name else
                        f"{info.node_namespace.rstrip('/')}/{info.node_name}")
                 if info.topic_type != ours:
-                    self._warn_once(f"{sub.topic_name}: {who} publishes {info.topic_type}, "
+                    self._warn_once("input_type",
+                                    f"{sub.topic_name}: {who} publishes {info.topic_type}, "
                                     f"this node subscribes {ours}: none of its messages "
                                     "arrive (different types never connect)",
                                     key=f"{sub.topic_name} {info.topic_type}")
                 elif (info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
                       and self._p(parameter) == "reliable"):
-                    self._warn_once(f"{sub.topic_name}: {who} publishes best effort, this "
+                    self._warn_once("input_qos",
+                                    f"{sub.topic_name}: {who} publishes best effort, this "
                                     "node subscribes reliable: none of its messages arrive; "
                                     f"start the node with -p {parameter}:=best_effort",
                                     key=f"{sub.topic_name} best effort")
@@ -455,7 +469,9 @@ class MpcNode(MpcParameters, Node):
         for note in notes:
             self._note("odom", note)
         if msg.child_frame_id and msg.child_frame_id not in self._base_frames:
-            self._warn_once(f"odom child_frame_id {msg.child_frame_id!r} is not the base link "
+            child = clipped(msg.child_frame_id)
+            self._warn_once("odom_child_frame",
+                            f"odom child_frame_id {child!r} is not the base link "
                             f"({' or '.join(sorted(self._base_frames))}): its twist is taken as "
                             "the base's (REP 105: the twist is in child_frame_id)")
         self._base_recent.append((time_to_ns(msg.header.stamp), pos, quat, lin, ang))
