@@ -1649,6 +1649,11 @@ def test_gait_settings_and_weights_outside_where_the_trot_walked_are_warned_abou
     assert any("step_duration 0.8 s is outside 0.15-0.7 s" in w
                for w in gait_warnings("trot", 0.8, None))
     assert any("duty_factor 0.1 is outside" in w for w in gait_warnings("trot", 0.3, 0.1))
+    # a duty factor of 1 (in the declared range) makes the trot stand: said as such, not as
+    # a value outside where it walked (a session 28 audit)
+    assert gait_warnings("trot", 0.3, 1.0) == [
+        "duty_factor 1: gait 'trot' never lifts a foot (it stands, like gait 'stand') and "
+        "cmd_vel is not followed"]
     assert weight_warnings(Weights()) == []
     heavy = weight_warnings(Weights(posture=30.0, base_position=1e6))
     assert len(heavy) == 1 and heavy[0].startswith("w_base_position 1e+06 is up to 2e+04x")

@@ -354,6 +354,34 @@ def test_the_help_lists_every_parameter(capsys):
     assert "kp (default the robot config's sim.kp)" in out
 
 
+def test_lockstep_starts_once_the_controller_subscribes_odom_too(context):
+    """A controller whose odom subscription was not matched yet missed the first lockstep
+    state (its joint_states one was): the simulator then waited lockstep_timeout for an
+    answer (an auditor's run, 1 of 6 starts)."""
+    sim = SimNode(parameter_overrides=[Parameter("lockstep", value=True)], context=context)
+    ctl = Node("controller", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    for node in (sim, ctl):
+        executor.add_node(node)
+    try:
+        ctl.create_subscription(JointState, "joint_states", lambda _: None, 10)
+        pub = ctl.create_publisher(JointTrajectory, "joint_trajectory", 10)
+        end = time.monotonic() + 10.0
+        while (sim._pub_joints.get_subscription_count() == 0
+               or pub.get_subscription_count() == 0):
+            assert time.monotonic() < end, "discovery timed out"
+            executor.spin_once(timeout_sec=0.01)
+        assert not sim.peers_ready  # no odom subscriber yet
+        ctl.create_subscription(Odometry, "odom", lambda _: None, 10)
+        while not sim.peers_ready:
+            assert time.monotonic() < end, "the odom subscriber was not seen"
+            executor.spin_once(timeout_sec=0.01)
+    finally:
+        executor.shutdown()
+        sim.destroy_node()
+        ctl.destroy_node()
+
+
 def test_lockstep_waits_for_the_answer_then_times_out(harness_factory):
     h = harness_factory(lockstep=True, lockstep_timeout=0.2, control_period=0.01)
     h.spin_until(lambda: h.joint_states)

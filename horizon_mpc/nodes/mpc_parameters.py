@@ -94,6 +94,9 @@ def gait_warnings(gait: str, step_duration: float | None = None,
                    f"loop ({EXPERIMENTAL_GAITS[gait]}; doc/locomotion.md); trot and walk do")
     if gait == "stand":
         return ["gait 'stand': the feet stay down and cmd_vel is not followed"]
+    if duty_factor is not None and duty_factor >= 1.0:
+        return [f"duty_factor {duty_factor:g}: gait {gait!r} never lifts a foot (it stands, "
+                "like gait 'stand') and cmd_vel is not followed"]
     lo, hi = WALKED_STEP_DURATION
     if step_duration is not None and not lo <= step_duration <= hi:
         out.append(f"step_duration {step_duration:g} s is outside {lo:g}-{hi:g} s, where the "

@@ -372,8 +372,11 @@ class SimNode(Node):
 
     @property
     def peers_ready(self) -> bool:
-        """Whether a ``joint_states`` subscriber and a ``joint_trajectory`` publisher exist."""
+        """Whether ``joint_states`` and ``odom`` subscribers and a ``joint_trajectory``
+        publisher exist (a controller whose odom subscription discovery had not matched yet
+        missed the first lockstep state, and the simulator waited lockstep_timeout)."""
         return (self._pub_joints.get_subscription_count() > 0
+                and self._pub_odom.get_subscription_count() > 0
                 and self._sub_trajectory.get_publisher_count() > 0)
 
     def _on_lockstep_timer(self) -> None:
@@ -381,8 +384,9 @@ class SimNode(Node):
             if self.peers_ready or time.monotonic() > self._deadline:
                 if not self.peers_ready:
                     self.get_logger().warning(
-                        "lockstep: no controller connected (joint_states subscriber and "
-                        "joint_trajectory publisher) after lockstep_timeout; starting anyway")
+                        "lockstep: no controller connected (joint_states and odom "
+                        "subscribers, joint_trajectory publisher) after lockstep_timeout; "
+                        "starting anyway")
                 self._started = True
                 self._publish_state(awaiting=True)
             return
