@@ -47,7 +47,12 @@ from horizon_mpc.closed_loop_profile import (
     load_pushes,
     unreached_segments,
 )
-from horizon_mpc.closed_loop_report import FRAME_PERIOD, fallen, render_replay
+from horizon_mpc.closed_loop_report import (
+    FRAME_PERIOD,
+    fallen,
+    gif_frame_period,
+    render_replay,
+)
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import GaitSettings, MpcSettings, config_gait, speed_scale
 from horizon_mpc.nodes.mpc_node import MpcNode
@@ -101,6 +106,7 @@ class Recording:
     plan_t: list[float] = field(default_factory=list)  # stamp of each plan the sim got
     plan_age: list[float] = field(default_factory=list)  # sim time at receipt - stamp (s)
     frames: list[np.ndarray] = field(default_factory=list)
+    frame_period: float = FRAME_PERIOD  # sim s between two frames (gif_frame_period)
     feet: list[str] = field(default_factory=list)
     wall_time: float = 0.0
     deadline_misses: int = 0  # the MPC node's count (solve longer than the period)
@@ -180,14 +186,7 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         log.warning("segment(s) %s last less than the control period (%g s): their commands "
                     "may never reach the MPC (the profile is sampled once per period)",
                     short, period)
-    limits = MpcSettings.from_dict(cfg.section("mpc"))
-    unreached = unreached_segments(segments, limits.max_velocity, limits.max_acceleration)
-    if unreached:
-        log.warning("segment(s) %s end before the command's ramp (%s s at the config's "
-                    "max_acceleration %s) reaches them: the robot follows the ramped command, "
-                    "which need not average as the profile does (a +-0.4 m/s flip every 0.5 s "
-                    "drove go2 0.97 m forward)", [i for i, _ in unreached],
-                    ", ".join(f"{r:.2g}" for _, r in unreached), limits.max_acceleration)
+    warn_unreached_segments(segments, cfg, mpc_parameters)
     loop = _Loop(segments, duration, gif, stop_after_fall, pushes)
     domain_id = run_domain_id(mode, domain_id)
     try:
@@ -206,6 +205,27 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
                     rec.t[-1])
     rec.max_velocity, rec.max_command_norm = command_limits(cfg, mpc_parameters)
     return rec
+
+
+def warn_unreached_segments(segments: Sequence[Segment], cfg: RobotConfig,
+                            mpc_parameters: Mapping[str, object] | None = None) -> None:
+    """Warn about the segments the MPC's command ramp cannot reach
+    (:func:`~horizon_mpc.closed_loop_profile.unreached_segments`), with the node's command
+    limits (:func:`command_limits`: its ``-p max_vx``..., gait and ``max_command_norm``;
+    until session 28 the config's, so a ``-p max_vx`` flip profile went unwarned) and the
+    config's ``max_acceleration``."""
+    st = MpcSettings.from_dict(cfg.section("mpc"))
+    try:
+        max_velocity, max_norm = command_limits(cfg, mpc_parameters)
+    except (TypeError, ValueError):  # a bad -p value: the MPC node refuses it, naming it
+        max_velocity, max_norm = st.max_velocity, st.max_command_norm
+    unreached = unreached_segments(segments, max_velocity, st.max_acceleration, max_norm)
+    if unreached:
+        log.warning("segment(s) %s end before the command's ramp (%s s at the config's "
+                    "max_acceleration %s) reaches them: the robot follows the ramped command, "
+                    "which need not average as the profile does (a +-0.4 m/s flip every 0.5 s "
+                    "drove go2 0.97 m forward)", [i for i, _ in unreached],
+                    ", ".join(f"{r:.2g}" for _, r in unreached), st.max_acceleration)
 
 
 def command_limits(cfg: RobotConfig, mpc_parameters: Mapping[str, object] | None = None
@@ -244,6 +264,7 @@ class _Loop:
 
     def __post_init__(self) -> None:
         self.pending = sorted(self.pushes, key=lambda p: p.time)
+        self.rec.frame_period = gif_frame_period(self.duration)
 
     def period(self, sim: SimNode, t: float, dt: float, pub_cmd: Publisher,
                cmd_mpc: np.ndarray, render: bool) -> bool:
@@ -264,7 +285,7 @@ class _Loop:
         rec.contact.append(st.foot_contact.copy())
         if render and self.gif and t >= self.next_frame - 1e-9:
             rec.frames.append(sim.sim.render())
-            self.next_frame += FRAME_PERIOD
+            self.next_frame += rec.frame_period
         if self.fell_at is None and fallen(st.q, rec.nominal_height):
             self.fell_at = t
             log.warning("the robot fell at t = %.2f s", t)
@@ -485,7 +506,7 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
         rec.mpc_process["exit_code"] = child.stop()
         rec.mpc_log = child.log_tail(lines=200)
     if loop.gif:  # rendered from the recorded states, not in the loop (it would steal time)
-        rec.frames = render_replay(robot, rec.t, rec.q)
+        rec.frames = render_replay(robot, rec.t, rec.q, rec.frame_period)
     return rec
 
 

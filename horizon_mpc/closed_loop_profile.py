@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from horizon_mpc.config import find_config_file, read_yaml
+from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM, limit_command
 from horizon_mpc.nodes.mpc_inputs import ABSURD_COMMAND
 from horizon_mpc.sim.simulator import PLAUSIBLE_WRENCH
 
@@ -166,20 +167,25 @@ def command_at(segments: Sequence[Segment], t: float) -> np.ndarray:
 
 
 def unreached_segments(segments: Sequence[Segment], max_velocity: Sequence[float],
-                       max_acceleration: Sequence[float]) -> list[tuple[int, float]]:
+                       max_acceleration: Sequence[float],
+                       max_command_norm: float = DEFAULT_MAX_NORM) -> list[tuple[int, float]]:
     """The segments (index, ramp time in s) whose command the MPC's ramp (each axis at most
-    ``max_acceleration``, commands clipped to ``max_velocity``) cannot reach from the one
-    before within the segment; the last segment is left out (it is held to the end).
+    ``max_acceleration``, commands limited as the MPC does: ``max_velocity`` per axis and
+    ``max_command_norm`` combined, :func:`~horizon_mpc.locomotion.command.limit_command`)
+    cannot reach from the one before within the segment; the last segment is left out (it
+    is held to the end). An axis with a zero acceleration never moves: inf.
 
     The robot follows the ramped command, not the profile's: go2 under +-0.4 m/s flipped
     every 0.5 s (1 m/s^2 needs 0.8 s for a flip) ran a command between -0.1 and +0.4 and
     ended 0.97 m ahead of a profile that averages zero (session 26 audit)."""
-    vmax, amax = np.asarray(max_velocity, float), np.asarray(max_acceleration, float)
+    amax = np.asarray(max_acceleration, float)
     out = []
     before = np.zeros(3)
     for i, seg in enumerate(segments):
-        cmd = np.clip([seg.vx, seg.vy, seg.wz], -vmax, vmax)
-        ramp = float(np.max(np.abs(cmd - before) / amax))
+        cmd = np.array(limit_command((seg.vx, seg.vy, seg.wz), max_velocity, max_command_norm))
+        change = np.abs(cmd - before)
+        with np.errstate(divide="ignore", invalid="ignore"):  # 0 acceleration: inf if changed
+            ramp = float(np.max(np.where(change > 0.0, change / amax, 0.0)))
         if i < len(segments) - 1 and ramp > seg.duration + 1e-9:
             out.append((i, ramp))
         before = cmd

@@ -255,6 +255,17 @@ def _edits(a: str, b: str) -> int:
     return d[len(a)][len(b)]
 
 
+def _urdf_path(path: Path, value: Any) -> str | None:
+    """``urdf_path`` of the config at ``path``: ``~`` expanded, a relative path taken from
+    the config file's folder (it was from the working folder: a config worked from one
+    folder only)."""
+    if value is None or value == "":
+        return None
+    if not isinstance(value, str):
+        raise ValueError(f"{path}: 'urdf_path' must be a file path, got {value!r}")
+    return str(path.parent / Path(value).expanduser())
+
+
 def _check_top_level_keys(path: Path, data: dict) -> None:
     """A key that is neither a known setting nor a section: refused when it is close to a
     known one (a misspelt ``mcp:`` section was ignored and the defaults used without a
@@ -293,7 +304,7 @@ def load_robot_config(name_or_path: str | Path) -> RobotConfig:
     return RobotConfig(
         name=path.stem,
         robot=data.get("robot"),
-        urdf_path=data.get("urdf_path"),
+        urdf_path=_urdf_path(path, data.get("urdf_path")),
         base_link=data.get("base_link", "base"),
         feet=[str(f) for f in feet],
         nominal_posture=data.get("nominal_posture", "standing"),

@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -570,6 +571,19 @@ def test_realtime_mode_renders_the_gif_afterwards_from_the_recorded_states(realt
     assert rec.frames[0].shape == (240, 320, 3)
 
 
+def test_a_long_runs_gif_frames_are_spread_out_to_bound_their_memory():
+    """Every frame is held until the GIF is written: a 40 s run held 400 MB more with its
+    GIF than without (session 28 audit). At most MAX_GIF_FRAMES frames, further apart."""
+    from horizon_mpc.closed_loop import _Loop
+    from horizon_mpc.closed_loop_report import MAX_GIF_FRAMES, gif_frame_period
+
+    assert gif_frame_period(10.0) == 0.05 and gif_frame_period(20.0) == 0.05
+    assert gif_frame_period(40.0) == pytest.approx(0.1)
+    assert gif_frame_period(600.0) * MAX_GIF_FRAMES == pytest.approx(600.0)
+    assert gif_frame_period(math.inf) == 0.05
+    assert _Loop([Segment(40.0)], 40.0, True, 1.0, []).rec.frame_period == pytest.approx(0.1)
+
+
 def test_an_unknown_robot_fails_before_any_process_starts(started_processes):
     with pytest.raises(FileNotFoundError, match="go3"):
         run("go3", REALTIME_SHORT, mode="realtime")
@@ -879,3 +893,34 @@ def test_segments_the_commands_ramp_cannot_reach_are_found():
                               [1.0, 1.0, 2.0]) == []
     assert unreached_segments(load_profile(DEFAULT_PROFILE), [0.6, 0.5, 0.8],
                               [1.0, 1.0, 2.0]) == []
+    # the combined limit as the MPC applies it: (0.6, 0.5, 0.8) is cut to 0.82 of each
+    corner = [Segment(0.55, vx=0.6, vy=0.5, wz=0.8), Segment(1.0)]
+    assert unreached_segments(corner, [0.6, 0.5, 0.8], [1.0, 1.0, 2.0]) == []
+    assert [i for i, _ in unreached_segments(corner, [0.6, 0.5, 0.8], [1.0, 1.0, 2.0],
+                                             max_command_norm=2.0)] == [0]
+    # an axis that cannot accelerate never reaches a command (no 0/0 warnings on the others)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        found = unreached_segments([Segment(1.0, vx=0.3), Segment(1.0, vy=0.2), Segment(1.0)],
+                                   [0.6, 0.5, 0.8], [1.0, 0.0, 2.0])
+    assert found == [(1, math.inf)]
+
+
+def test_the_ramp_warning_uses_the_nodes_command_limits(caplog):
+    """It used the config's limits: a +-0.8 m/s flip with -p max_vx=1.0 (1.6 s ramps in 1.2 s
+    segments) was not warned about, and with -p gait=walk (a third of the limits) a
+    reachable segment was (session 28 audit)."""
+    from horizon_mpc.closed_loop import warn_unreached_segments
+    from horizon_mpc.config import load_robot_config
+
+    cfg = load_robot_config("go2")
+    flips = [Segment(1.0)] + [Segment(1.2, vx=0.8 * (-1) ** k) for k in range(4)] + [
+        Segment(2.0)]
+    with caplog.at_level("WARNING", logger="horizon_mpc.closed_loop"):
+        warn_unreached_segments(flips, cfg, {"max_vx": 1.0})
+    assert "segment(s) [2, 3, 4] end before the command's ramp (1.6, 1.6, 1.6 s" in caplog.text
+    caplog.clear()
+    walk = [Segment(0.3, vx=0.4), Segment(0.3, vx=-0.4), Segment(1.0)]
+    with caplog.at_level("WARNING", logger="horizon_mpc.closed_loop"):
+        warn_unreached_segments(walk, cfg, {"gait": "walk"})
+    assert "segment(s) [1] end before the command's ramp (0.4 s" in caplog.text

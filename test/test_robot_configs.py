@@ -247,6 +247,28 @@ def test_a_config_the_robot_cannot_stand_with_is_refused_by_name(tmp_path):
     assert q[2] > 0.2
 
 
+def test_a_relative_urdf_path_is_taken_from_the_configs_folder(tmp_path, monkeypatch):
+    """It was taken from the working folder: a config with its URDF beside it worked from
+    that folder only (session 28 audit)."""
+    import shutil
+
+    from horizon_mpc.posture import config_urdf_path
+    from horizon_mpc.robots import example_robot_files
+
+    (tmp_path / "myrobot").mkdir()
+    shutil.copy(example_robot_files("go2").urdf, tmp_path / "myrobot" / "robot.urdf")
+    cfg_file = tmp_path / "mine.yaml"
+    cfg_file.write_text("urdf_path: myrobot/robot.urdf\nfeet: [FL_foot, FR_foot, RL_foot, "
+                        "RR_foot]\n")
+    monkeypatch.chdir("/")
+    cfg = load_robot_config(str(cfg_file))
+    assert config_urdf_path(cfg) == tmp_path / "myrobot" / "robot.urdf"
+    assert config_urdf_path(cfg).is_file()
+    cfg_file.write_text("urdf_path: 3\nfeet: [FL_foot]\n")
+    with pytest.raises(ValueError, match="'urdf_path' must be a file path, got 3"):
+        load_robot_config(str(cfg_file))
+
+
 def test_the_walking_mpc_names_what_it_cannot_take():
     """ur5 (a fixed-base arm) was refused as having 'continuous joints', which it has not;
     a continuous joint was not named."""
