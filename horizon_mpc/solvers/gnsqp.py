@@ -237,7 +237,7 @@ class GnSqpSolver(NlpSolver):
         lbx, ubx = (b[pw] for b in tr.bounds_w())
         lbg, ubg = (b[pg] for b in tr.bounds_g())
         p = tr.parameters()
-        w = np.clip(tr.initial_w()[pw], lbx, ubx)
+        w = np.clip(self._initial_w()[pw], lbx, ubx)
         # warm-start multipliers, of the sign the current bounds allow (a bound removed
         # since the last solve frees its multiplier)
         lam_g = _signed(self.lam_g[pg], lbg, ubg) if self.lam_g is not None else np.zeros(tr.ng)

@@ -115,7 +115,7 @@ class IpoptSolver(NlpSolver):
         tr = self.transcription
         lbx, ubx = tr.bounds_w()
         lbg, ubg = tr.bounds_g()
-        args = {"x0": tr.initial_w(), "p": tr.parameters(), "lbx": lbx, "ubx": ubx,
+        args = {"x0": self._initial_w(), "p": tr.parameters(), "lbx": lbx, "ubx": ubx,
                 "lbg": lbg, "ubg": ubg}
         warm = bool(self.opts["warm_start_duals"] and self.lam_x is not None)
         if warm:

@@ -34,13 +34,25 @@ class NlpSolver(Solver):
         self.lam_g: np.ndarray | None = None
 
     def shift(self) -> None:
-        """Shift the guesses and parameters (``Problem.shift``) and the multipliers."""
+        """Shift the guesses and parameters (``Problem.shift``), the multipliers and the
+        last solution (whose collocation states warm-start the next solve)."""
         super().shift()
         tr = self.transcription
         if self.lam_x is not None:
             self.lam_x = tr.shift_vector(self.lam_x, tr.w_blocks)
             self.lam_g = tr.shift_vector(self.lam_g, tr.g_blocks)
+        if self.w is not None:
+            self.w = tr.shift_vector(self.w, tr.w_blocks)
+            if tr.degree:  # the last interval's, repeated, belong to no interval now
+                b = tr.w_blocks[3]
+                self.w[b.stop - b.rows:b.stop] = np.nan
 
     def reset(self) -> None:
-        """Forget the multipliers: the next solve starts from zero multipliers (cold)."""
-        self.lam_x = self.lam_g = None
+        """Forget the multipliers and the last solution: the next solve starts from zero
+        multipliers and the problem's initial guesses (cold)."""
+        self.lam_x = self.lam_g = self.w = None
+
+    def _initial_w(self) -> np.ndarray:
+        """The problem's initial guesses as ``w``, collocation states from the last
+        solution (:meth:`Transcription.initial_w`)."""
+        return self.transcription.initial_w(self.w)
