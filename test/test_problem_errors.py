@@ -693,6 +693,41 @@ def test_a_dt_parameter_that_is_not_positive_is_refused_at_the_solve(prb, solver
     assert s.solve()
 
 
+@pytest.mark.parametrize("solver", ["ipopt", "gnsqp"])
+def test_a_dt_of_a_single_variable_and_a_parameter_is_checked_at_the_guess(solver):
+    """dt = T * frac (a free final time split by a parameter): a negative frac on a node
+    solved a time-reversed interval, 'Solve_Succeeded' with T 2.12 for the optimum 2
+    (session 28 audit). Checked where the solver starts: T's guess within its bounds."""
+    prb = Problem(20)
+    x = prb.create_state_variable("pos", 1)
+    v = prb.create_state_variable("vel", 1)
+    u = prb.create_input_variable("u", 1)
+    T = prb.create_single_variable("T", 1)
+    frac = prb.create_parameter("frac", 1)
+    prb.set_dynamics(cs.vertcat(v, u))
+    prb.set_dt(T * frac)
+    x.set_bounds(0, 0, nodes=0)
+    v.set_bounds(0, 0, nodes=0)
+    u.set_bounds(-1, 1)
+    T.set_bounds(0.1, 10)
+    T.set_initial_guess(3)
+    prb.create_final_constraint("goal", cs.vertcat(x - 1, v))
+    prb.create_final_cost("time", T)
+    fractions = np.full((1, 21), 1 / 20)
+    frac.assign(fractions)
+    s = make_solver(solver, prb)
+    assert s.solve() and s.solution["T"].item() == pytest.approx(2.0, abs=1e-4)
+    fractions[0, 5] = -0.05
+    frac.assign(fractions)
+    with pytest.raises(ValueError, match=r"single variables' initial guess it is -0\.1.* at "
+                                         r"node 5"):
+        s.solve()
+    fractions[0, 5] = 1 / 20
+    frac.assign(fractions)
+    T.set_initial_guess(-1.0)  # clipped to its lower bound 0.1: where the solver starts
+    assert s.solve()
+
+
 @pytest.mark.parametrize("name", ["ipopt", "gnsqp", "ilqr"])
 def test_every_solver_resets_to_a_cold_start_by_one_name(prb, name, monkeypatch):
     """reset() on the NLP solvers, reset_multipliers() only on the ILQR: one name for all."""
