@@ -388,6 +388,13 @@ def test_none_as_a_bound_is_no_bound_on_that_side(prb):
     con = prb.create_constraint("c", prb.get_variable("x")[0], bounds=(0.0, None))
     np.testing.assert_array_equal(con.upper_bounds, np.inf)
     np.testing.assert_array_equal(con.lower_bounds, 0.0)
+    # an element of a list too ('NaN bound' before; session 28 audit)
+    x = prb.get_variable("x")
+    x.set_bounds([None, 0.0], [1.0, None], nodes=3)
+    assert x.lower_bounds[:, 3].tolist() == [-np.inf, 0.0]
+    assert x.upper_bounds[:, 3].tolist() == [1.0, np.inf]
+    x.set_bounds([[None, -1.0]] * 2, None, nodes=[4, 5])  # one column per node
+    assert x.lower_bounds[:, 4:6].tolist() == [[-np.inf, -1.0], [-np.inf, -1.0]]
 
 
 

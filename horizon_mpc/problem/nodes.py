@@ -119,8 +119,27 @@ def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:
 
 def bound_values(value, side: float, dim: int, n_sel: int, what: str = "") -> np.ndarray:
     """:func:`broadcast_values` of a bound, None being no bound (``side``: -inf for a lower
-    bound, inf for an upper one; it was taken as a NaN bound and refused)."""
-    return broadcast_values(side if value is None else value, dim, n_sel, what)
+    bound, inf for an upper one; it was taken as a NaN bound and refused), as a whole or as
+    an element of a list (``[None, 0]``: no bound on the first component)."""
+    if value is None:
+        value = side
+    elif isinstance(value, (list, tuple)) and any(_holds_none(v) for v in value):
+        value = _none_to(value, side)
+    return broadcast_values(value, dim, n_sel, what)
+
+
+def _holds_none(value) -> bool:
+    return value is None or (isinstance(value, (list, tuple))
+                             and any(_holds_none(v) for v in value))
+
+
+def _none_to(value, side: float):
+    """``value`` (nested lists/tuples) with every None replaced by ``side``."""
+    if value is None:
+        return side
+    if isinstance(value, (list, tuple)):
+        return [_none_to(v, side) for v in value]
+    return value
 
 
 def check_bounds(lo: np.ndarray, hi: np.ndarray, what: str) -> None:
