@@ -85,8 +85,20 @@ __all__ = [
 _log = logging.getLogger(__name__)
 
 CC = os.environ.get("CC", "gcc")
-#: the compiler command: ``$CC`` split as a shell would ("ccache gcc", "gcc -pipe")
-CC_ARGV = tuple(shlex.split(CC)) or ("gcc",)
+
+
+def _compiler_argv(cc: str) -> tuple[str, ...]:
+    """``cc`` split as a shell would ("ccache gcc", "gcc -pipe"); one that does not split
+    (an unbalanced quote) is kept whole: it is then no compiler on PATH, the documented
+    uncompiled fallback with one warning (it was a ValueError at import)."""
+    try:
+        return tuple(shlex.split(cc)) or ("gcc",)
+    except ValueError:
+        return (cc,)
+
+
+#: the compiler command: ``$CC`` split as a shell would
+CC_ARGV = _compiler_argv(CC)
 # Optimisation level by size of the generated C. SX code is long straight-line arithmetic:
 # measured on go2's inverse-dynamics derivatives mapped over 50 nodes (423 kB of C), -O1
 # compiles in 10 s against 24 s for -O3 and runs within 5% of it (doc/benchmarks.md).
@@ -98,7 +110,10 @@ _OPT_LARGE = "-O1"
 # ~12 s (-O2: ~50 s for the same speed); doc/benchmarks.md, session 8.
 _OPT_LARGE_EXTRA = ("-fstrict-aliasing", "-fexpensive-optimizations", "-ftree-slp-vectorize")
 _FLAGS = ("-shared", "-fPIC")
-_POLICY = f"{_OPT_BY_SIZE}|{_OPT_LARGE}|{_OPT_LARGE_EXTRA}|{_FLAGS}|v2"
+# every symbol resolved when linking (Linux): a function calling another compiled one (its
+# ``<name>_incref``... are in that library) linked, then killed the process at dlopen
+_LINK_FLAGS = ("-Wl,-z,defs",) if sys.platform.startswith("linux") else ()
+_POLICY = f"{_OPT_BY_SIZE}|{_OPT_LARGE}|{_OPT_LARGE_EXTRA}|{_FLAGS}|{_LINK_FLAGS}|v3"
 # x86-64-v3 (AVX2, FMA, BMI1/2, F16C, LZCNT, MOVBE): the CPU features /proc/cpuinfo names
 _X86_64_V3 = frozenset({"avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "abm", "movbe", "xsave"})
 _ARCH_MEMO: dict[tuple[str, str], tuple[str, ...]] = {}
@@ -158,7 +173,10 @@ struct switch typedef union unsigned void volatile while main abs acos asin atan
 ceil cos cosh erf exp expm1 fabs floor fmax fmin fmod hypot log log10 log1p log2 pow round
 sin sinh sqrt tan tanh trunc sign copysign j0 j1 jn y0 y1 yn modf frexp ldexp lgamma tgamma
 rint lrint llrint nearbyint remainder remquo scalbn scalbln logb ilogb exp2 fdim fma nan
-erfc asinh acosh atanh lround llround isnan isinf signbit gamma drem significand""".split())
+erfc asinh acosh atanh lround llround isnan isinf signbit gamma drem significand isfinite
+isnormal fpclassify nextafter nexttoward finite double_t float_t isgreater isless isunordered
+INFINITY NAN HUGE_VAL HUGE_VALF HUGE_VALL M_PI M_E CASADI_SYMBOL_EXPORT CASADI_PREFIX
+casadi_int casadi_real""".split())
 _C_RESERVED = _C_RESERVED | {n + suffix for n in _C_RESERVED for suffix in ("f", "l")}
 
 
@@ -220,9 +238,32 @@ def _renamed(fn: cs.Function, name: str) -> cs.Function:
     return cs.Function(name, args, fn.call(args), fn.name_in(), fn.name_out())
 
 
+_TARGET_MEMO: dict[tuple[str, ...], str] = {}
+
+
+def _arch_key() -> str:
+    """:func:`arch_flags` as a cache key: ``-march=native`` with what it means on this CPU
+    (the compiler's target options; a hash of /proc/cpuinfo's flags if it cannot say), so
+    that a cache shared by two CPUs never gives one the other's code (AVX-512 on a CPU
+    without it: SIGILL)."""
+    flags = arch_flags()
+    if not any(f == "-march=native" for f in flags):
+        return " ".join(flags)
+    if flags not in _TARGET_MEMO:
+        try:
+            res = subprocess.run([*CC_ARGV, *flags, "-Q", "--help=target"], capture_output=True,
+                                 text=True, check=False, timeout=30)
+            target = res.stdout if res.returncode == 0 and res.stdout.strip() else ""
+        except (OSError, subprocess.SubprocessError):
+            target = ""
+        target = target or " ".join(sorted(_cpu_flags()))
+        _TARGET_MEMO[flags] = hashlib.sha256(target.encode()).hexdigest()[:16]
+    return " ".join(flags) + " " + _TARGET_MEMO[flags]
+
+
 def _key(fn: cs.Function) -> str:
     h = hashlib.sha256()
-    for part in (fn.serialize(), _POLICY, " ".join(arch_flags()), CC, cs.__version__):
+    for part in (fn.serialize(), _POLICY, _arch_key(), CC, cs.__version__):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()[:24]
@@ -301,16 +342,41 @@ def _uncompiled_reason(exc: OSError | CompilerError, folder: Path) -> str:
     if isinstance(exc, OSError):
         return f"{folder}: {exc.strerror or exc}"
     lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
-    errors = [line for line in lines[1:] if "error" in line.lower()]
-    return f"the C compiler failed: {(errors or lines or [repr(exc)])[0 if errors else -1]}"
+    # the cause before the compiler's generic lines: a full disk (a truncated source reads
+    # as a syntax error, a failed link as 'ld returned 1'), a function calling another
+    # compiled one (its symbols are in that library), then the first error
+    def first(needle: str) -> str | None:
+        return next((line for line in lines[1:] if needle in line.lower()), None)
+
+    if first("no space left on device") or _disk_full(folder):
+        return f"{folder}: no space left on the device"
+    undefined = first("undefined reference to")
+    if undefined:
+        return (f"the C compiler failed: {undefined} (a function that calls a compiled "
+                "function: compile the uncompiled one instead)")
+    return f"the C compiler failed: {first('error') or (lines or [repr(exc)])[-1]}"
+
+
+def _disk_full(folder: Path) -> bool:
+    """Whether ``folder``'s file system has less than 1 MB free (a generated source cut
+    short there gave a C syntax error)."""
+    try:
+        return shutil.disk_usage(folder).free < 1_000_000
+    except OSError:
+        return False
 
 
 def _warn_uncompiled(reason: str) -> None:
     if reason not in _UNCOMPILED_WARNED:
         _UNCOMPILED_WARNED.add(reason)
+        if "not found on PATH" in reason:
+            advice = f"install a C compiler (CC={CC}), or "
+        elif reason.startswith("the C compiler failed"):
+            advice = ""
+        else:
+            advice = "set HORIZON_MPC_CACHE_DIR to a writable folder, or "
         _log.warning("cannot compile CasADi functions (%s): running them uncompiled (slower); "
-                     "install a C compiler (CC=%s), set HORIZON_MPC_CACHE_DIR to a writable "
-                     "folder, or HORIZON_MPC_NO_CODEGEN=1 to silence this", reason, CC)
+                     "%sset HORIZON_MPC_NO_CODEGEN=1 to silence this", reason, advice)
 
 
 def library_damage(lib: Path) -> str | None:
@@ -438,7 +504,7 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
     work = Path(tempfile.mkdtemp(prefix=".build_", dir=lib.parent))
     try:
         tmp_lib = work / lib.name
-        cmd = [*CC_ARGV, *compiler_args(work), "-o", str(tmp_lib), "-lm"]
+        cmd = [*CC_ARGV, *compiler_args(work), "-o", str(tmp_lib), "-lm", *_LINK_FLAGS]
         returncode, stderr = _run_compiler(cmd)
         if returncode != 0:
             raise CompilerError(f"compiling {what} failed ({' '.join(cmd)}):\n{stderr[-2000:]}")
@@ -452,7 +518,8 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
         shutil.rmtree(work, ignore_errors=True)
     try:
         prune_cache(lib.parent, keep=(lib,))
-    except ValueError as exc:  # a malformed bound must not fail the build
+    except (ValueError, OSError) as exc:  # a malformed bound, an unreadable folder: the
+        # library is built, the cache only not pruned
         if str(exc) not in _UNCOMPILED_WARNED:
             _UNCOMPILED_WARNED.add(str(exc))
             _log.warning("%s: the cache is not pruned", exc)
@@ -501,10 +568,16 @@ class CacheInfo:
     recent: int
 
 
+#: the cache's library names, ``<function>_<24 hex digits of the key>.so``
+_LIBRARY_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*_[0-9a-f]{24}\.so")
+
+
 def _libraries(folder: Path) -> list[tuple[float, int, Path]]:
     """(mtime, size, path) of the cache's libraries, least recently used first."""
     out = []
     for lib in folder.glob("*.so"):
+        if not _LIBRARY_NAME.fullmatch(lib.name):  # not one of ours (libcasadi.so...)
+            continue
         with contextlib.suppress(OSError):
             st = lib.stat()
             out.append((st.st_mtime, st.st_size, lib))
@@ -541,21 +614,32 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
     libs = _libraries(folder)
     total = sum(size for _, size, _ in libs)
     spared = {str(p) for p in keep} | set(_LOADED)
-    now, deleted = time.time(), []
+    now, deleted, undeletable = time.time(), [], []
     for mtime, size, lib in libs:
         if total <= max_bytes and max_bytes > 0:  # 0 (clear): empty files go too
             break
         if str(lib) in spared or now - mtime < spare_s:
             continue
-        with contextlib.suppress(FileNotFoundError):  # another process pruned it
+        try:
             lib.unlink()
+        except FileNotFoundError:  # another process pruned it
+            pass
+        except OSError as exc:  # another user's file in a shared folder, a read-only cache
+            undeletable.append(f"{lib.name}: {exc.strerror or exc}")
+            continue
+        else:
             deleted.append(lib)
-        checksum_path(lib).unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            checksum_path(lib).unlink(missing_ok=True)
         total -= size
     if max_bytes == 0:  # clear: checksums whose library is gone too
         for orphan in folder.glob("*.so.sha256"):
-            if not orphan.with_suffix("").exists():
-                orphan.unlink(missing_ok=True)
+            if _LIBRARY_NAME.fullmatch(orphan.name[:-7]) and not orphan.with_suffix("").exists():
+                with contextlib.suppress(OSError):
+                    orphan.unlink()
+    if undeletable:
+        _log.warning("codegen cache %s: %d libraries could not be removed (%s)", folder,
+                     len(undeletable), "; ".join(undeletable[:3]))
     if deleted:
         _log.info("codegen cache %s: removed %d least recently used libraries (bound %.0f MB, "
                   "HORIZON_MPC_CACHE_MAX_MB)", folder, len(deleted), max_bytes / 1e6)

@@ -47,6 +47,9 @@ def main(argv: list[str] | None = None) -> int:
             removed = codegen.prune_cache(args.dir, max_bytes=bound)
     except ValueError as exc:
         parser.error(str(exc))
+    except OSError as exc:  # a cache folder that cannot be read
+        parser.exit(1, f"{parser.prog}: error: {exc.filename or args.dir}: "
+                       f"{exc.strerror or exc}\n")
     if args.command != "info":
         print(f"removed {len(removed)} libraries")
     info = codegen.cache_info(args.dir)

@@ -279,7 +279,7 @@ def test_a_library_of_a_cache_without_checksums_is_adopted_not_rebuilt(cache, ca
     assert float(again(np.ones(3), 2.0)[1]) == pytest.approx(3.0)
     lib.unlink()  # this process keeps its mapping of the old file
     codegen.checksum_path(lib).unlink()
-    (cache / "orphan_0.so.sha256").write_text("0\n")
+    (cache / f"orphan_{_KEY}.so.sha256").write_text("0\n")
     assert codegen.prune_cache(max_bytes=0, spare_s=0.0) == []  # clear: nothing but the orphan
     assert not list(cache.glob("*.sha256"))
 
@@ -352,11 +352,24 @@ def test_a_killed_process_takes_its_compiler_with_it(tmp_path):
 # --------------------------------------------------------------------------------------------
 # the cache's bound: least recently used libraries go first
 
+_KEY = "0" * 24  # a cache key, as the cache names its libraries
+
+
+def _lib(name: str) -> str:
+    """The file name of a cached library of function ``name``."""
+    return f"{name}_{_KEY}.so"
+
+
+def _short(path: Path) -> str:
+    """``name.so`` for the cached library ``name_<key>.so``."""
+    return path.name.replace(f"_{_KEY}", "")
+
+
 def _fake_libraries(folder: Path, ages_s: dict[str, float], size: int = 1000) -> None:
     """Files named like cached libraries, last used ``ages_s`` seconds ago."""
     now = time.time()
     for name, age in ages_s.items():
-        path = folder / f"{name}.so"
+        path = folder / _lib(name)
         path.write_bytes(b"\0" * size)
         os.utime(path, (now - age, now - age))
 
@@ -364,17 +377,17 @@ def _fake_libraries(folder: Path, ages_s: dict[str, float], size: int = 1000) ->
 def test_prune_removes_the_least_recently_used_libraries_down_to_the_bound(cache):
     _fake_libraries(cache, {"old": 9000, "older": 9500, "recent": 3000, "fresh": 60})
     removed = codegen.prune_cache(cache, max_bytes=2500)
-    assert sorted(p.name for p in removed) == ["old.so", "older.so"]
-    assert sorted(p.name for p in cache.glob("*.so")) == ["fresh.so", "recent.so"]
+    assert sorted(_short(p) for p in removed) == ["old.so", "older.so"]
+    assert sorted(_short(p) for p in cache.glob("*.so")) == ["fresh.so", "recent.so"]
     assert codegen.prune_cache(cache, max_bytes=2500) == []  # within the bound now
 
 
 def test_prune_spares_recent_kept_and_unbounded(cache):
     _fake_libraries(cache, {"a": 9000, "b": 8000, "c": 100})  # c: used in the last 10 min
     assert codegen.prune_cache(cache, max_bytes=None) == []
-    removed = codegen.prune_cache(cache, max_bytes=0, keep=(cache / "a.so",))
-    assert [p.name for p in removed] == ["b.so"]
-    assert sorted(p.name for p in cache.glob("*.so")) == ["a.so", "c.so"]
+    removed = codegen.prune_cache(cache, max_bytes=0, keep=(cache / _lib("a"),))
+    assert [_short(p) for p in removed] == ["b.so"]
+    assert sorted(_short(p) for p in cache.glob("*.so")) == ["a.so", "c.so"]
 
 
 def test_loading_from_the_cache_marks_the_library_used(cache):
@@ -416,7 +429,7 @@ def test_cache_command_line_reports_prunes_and_clears(cache):
     prune = subprocess.run([*cmd, "prune", "--max-mb", "3"], env=env, capture_output=True,
                            text=True, timeout=120)
     assert prune.returncode == 0 and "removed 1 libraries" in prune.stdout, prune.stdout
-    assert [p.name for p in cache.glob("*.so")] == ["b.so"]
+    assert [_short(p) for p in cache.glob("*.so")] == ["b.so"]
     clear = subprocess.run([*cmd, "clear"], env=env, capture_output=True, text=True,
                            timeout=120)
     assert clear.returncode == 0 and "0 libraries" in clear.stdout
@@ -439,7 +452,7 @@ def test_clear_empties_the_cache_empty_files_included(cache):
     _fake_libraries(cache, {"a": 9000})
     _fake_libraries(cache, {"empty": 9000}, size=0)
     removed = codegen.prune_cache(cache, max_bytes=0, spare_s=0.0)
-    assert sorted(p.name for p in removed) == ["a.so", "empty.so"]
+    assert sorted(_short(p) for p in removed) == ["a.so", "empty.so"]
     assert list(cache.glob("*.so")) == []
 
 
@@ -471,3 +484,98 @@ def test_cache_command_line_names_a_cache_path_that_is_no_folder(tmp_path, monke
     out = capsys.readouterr().out
     assert "0 libraries" in out and "no such folder yet" in out
     assert not (tmp_path / "none").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# session 28 audit of the cache
+
+
+def test_a_function_calling_a_compiled_function_runs_uncompiled_and_the_process_lives(cache):
+    """Its library linked with the callee's symbols undefined and dlopen killed the process
+    (exit 127), every later run too (the library stayed cached). Linked with every symbol
+    defined, it fails to build: the uncompiled fallback, with the reason. In a child process
+    (a regression would kill pytest)."""
+    script = """
+import logging, numpy as np, casadi as cs
+from horizon_mpc import codegen
+logging.basicConfig(level=logging.WARNING)
+x = cs.SX.sym("x", 3)
+base = codegen.compile_function(cs.Function("base", [x], [cs.sin(x) * 2 + x[0] * x[1]]))
+assert codegen.compiled_library(base) is not None
+mapped = codegen.compile_function(base.map(5))
+out = np.array(mapped(np.tile([0.1, 0.2, 0.3], (5, 1)).T))
+assert np.allclose(out[:, 0], np.sin([0.1, 0.2, 0.3]) * 2 + 0.02), out
+print("alive", codegen.compiled_library(mapped))
+"""
+    env = {**os.environ, "HORIZON_MPC_CACHE_DIR": str(cache)}
+    for _ in range(2):  # the second run finds the cache as the first left it
+        res = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                             text=True, timeout=300)
+        assert res.returncode == 0 and "alive None" in res.stdout, res.stderr[-2000:]
+        assert "undefined reference to" in res.stderr and "compile the uncompiled" in res.stderr
+    assert not list(cache.glob("map5_base_*.so"))
+
+
+def test_native_march_keys_the_cache_by_what_it_means_on_this_cpu(fresh_arch, monkeypatch):
+    """-march=native was hashed as the text: two CPUs sharing a cache got the same file
+    (AVX-512 code on this machine)."""
+    monkeypatch.setenv("HORIZON_MPC_CODEGEN_MARCH", "native")
+    monkeypatch.setattr(codegen, "_TARGET_MEMO", {})
+    outputs = iter(["  -march=  cooperlake\n  -mavx512f  [enabled]\n",
+                    "  -march=  znver2\n  -mavx512f  [disabled]\n"])
+
+    class Done:
+        returncode = 0
+
+        def __init__(self) -> None:
+            self.stdout = next(outputs)
+
+    monkeypatch.setattr(codegen.subprocess, "run", lambda *a, **k: Done())
+    first = codegen._arch_key()
+    assert first.startswith("-march=native ") and codegen._arch_key() == first  # memo
+    monkeypatch.setattr(codegen, "_TARGET_MEMO", {})
+    assert codegen._arch_key() != first
+    monkeypatch.setenv("HORIZON_MPC_CODEGEN_MARCH", "x86-64-v3")
+    assert codegen._arch_key() == "-march=x86-64-v3"
+
+
+def test_clear_and_prune_leave_other_files_and_survive_what_they_cannot_remove(cache, caplog):
+    """`clear` removed any *.so of the folder (libcasadi.so copied there went); a library
+    that could not be removed (another user's, a read-only cache) made a build fall back
+    to uncompiled and the command line end in a traceback."""
+    (cache / "libcasadi.so").write_bytes(b"\0" * 10)
+    _fake_libraries(cache, {"old": 9000})
+    (cache / _lib("stuck")).mkdir()  # unlink fails: IsADirectoryError
+    os.utime(cache / _lib("stuck"), (1e9, 1e9))
+    removed = codegen.prune_cache(cache, max_bytes=0, spare_s=0.0)
+    assert [_short(p) for p in removed] == ["old.so"]
+    assert (cache / "libcasadi.so").is_file()
+    assert "1 libraries could not be removed" in caplog.text
+    fn = codegen.compile_function(_small_function())  # builds, then prunes: still compiled
+    assert codegen.compiled_library(fn) is not None
+
+
+def test_names_of_math_h_and_casadi_macros_are_made_other_symbols():
+    """nextafter, isfinite, M_PI... did not compile (and the warning said to install a
+    C compiler)."""
+    for name in ("nextafter", "isfinite", "fpclassify", "M_PI", "INFINITY", "CASADI_PREFIX",
+                 "casadi_real", "double_t"):
+        assert codegen.function_name(name) == f"f_{name}"
+    x = cs.SX.sym("x")
+    fn = codegen.compile_function(cs.Function("nextafter", [x], [2 * x]))
+    assert float(fn(3.0)) == 6.0
+
+
+def test_a_cc_that_does_not_split_and_the_reasons_a_build_failed(tmp_path):
+    """CC='gcc "x' was a ValueError at import; a full disk read as a C syntax error or
+    'ld returned 1'."""
+    assert codegen._compiler_argv('gcc "x') == ('gcc "x',)
+    assert codegen._compiler_argv("ccache gcc") == ("ccache", "gcc")
+    full = codegen.CompilerError("compiling f failed (gcc ...):\n/usr/bin/ld: final link "
+                                 "failed: No space left on device\ncollect2: error: ld "
+                                 "returned 1 exit status")
+    assert codegen._uncompiled_reason(full, tmp_path) == f"{tmp_path}: no space left on the device"
+    syntax = codegen.CompilerError("compiling f failed (gcc ...):\nf.c:3:1: error: expected "
+                                   "expression at end of input")
+    assert codegen._uncompiled_reason(syntax, tmp_path).endswith("error: expected expression "
+                                                                 "at end of input")
