@@ -1616,14 +1616,22 @@ def test_timing_settings_outside_where_the_robot_walked_are_warned_about():
     from horizon_mpc.nodes.mpc_parameters import timing_warnings
 
     assert timing_warnings(0.02, 24, 0.02, 6) == []  # the defaults
-    assert timing_warnings(0.02, 24, 0.1, 6) == []  # 10 Hz: walked
+    assert timing_warnings(0.02, 24, 0.04, 6) == []  # 25 Hz: walked (go2, a1, solo12)
     assert timing_warnings(0.01, 24, 0.01, 6) == []
+    # 10 Hz: go2, a1 and anymal_c fell in the lockstep loop (session 28 audit)
+    assert [w for w in timing_warnings(0.02, 24, 0.1, 6) if "5 nodes a tick" in w]
     five_hz = timing_warnings(0.02, 24, 0.2, 6)
     assert any("ends before the next tick" in w and "publish_points >= 11" in w
                for w in five_hz)
     assert any("10 nodes a tick" in w for w in five_hz)
-    assert timing_warnings(0.02, 24, 0.2, 6, trigger="state") == []  # ticks on states
+    # the last point is at (points - 1) dt: 5 points at 10 Hz end 0.08 s in, 1 point at once
+    # (both passed, and fell in the lockstep loop)
+    for period, points, need in ((0.1, 5, 6), (0.02, 1, 2)):
+        assert any(f"publish_points >= {need}" in w
+                   for w in timing_warnings(0.02, 24, period, points)), (period, points)
+    assert not any("publish_points" in w for w in timing_warnings(0.02, 24, 0.1, 6))
     assert any("dt 0.04 s" in w for w in timing_warnings(0.04, 24, 0.04, 6))
+    assert any("dt 0.03 s" in w for w in timing_warnings(0.03, 24, 0.03, 6))  # solo12 fell
     assert any("n_nodes 12" in w for w in timing_warnings(0.02, 12, 0.02, 6))
     assert any("n_nodes 16" in w for w in timing_warnings(0.02, 16, 0.02, 6))  # real time
     assert timing_warnings(0.02, 20, 0.02, 6) == []

@@ -214,7 +214,8 @@ class MpcNode(MpcParameters, Node):
         settings.prepare_ahead = bool(self._p("prepare_ahead"))
         nodes_per_tick = settings.dt * float(self._p("control_rate"))
         nodes_per_tick = 1.0 / nodes_per_tick if nodes_per_tick > 0 else math.nan
-        if settings.prepare_ahead and self._p("trigger") == "timer" and not (
+        # with trigger 'state' too: a lockstep simulator steps by the control period
+        if settings.prepare_ahead and not (
                 round(nodes_per_tick) >= 1 and abs(nodes_per_tick - round(nodes_per_tick))
                 <= 0.05):
             # a tick of a fraction of a node: each preparation predicted node 0 from a warm
@@ -239,8 +240,7 @@ class MpcNode(MpcParameters, Node):
             self.get_logger().warning(note)
         for note in timing_warnings(settings.dt, settings.n_nodes,
                                     1.0 / self._p("control_rate"),
-                                    min(self._p("publish_points"), settings.n_nodes),
-                                    self._p("trigger")):
+                                    min(self._p("publish_points"), settings.n_nodes)):
             self.get_logger().warning(note)
         return settings
 

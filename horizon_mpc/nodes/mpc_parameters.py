@@ -51,11 +51,16 @@ MIN_DUTY_FACTOR = 0.05  # the smallest duty_factor accepted (0 stands for the ga
 
 # where the walking MPC was seen to walk and to fall (go2, lockstep, forward 0.3 m/s and a
 # turn; doc/mpc_node.md): the accepted ranges are wider, the node warns outside these
-WALKED_DT = (0.008, 0.035)  # s; 0.04 fell; 0.008 (60 nodes, 125 Hz) walked, session 24
+# s: 0.008 (60 nodes, 125 Hz, session 24) to 0.025 walked for every robot tried; go2 and
+# anymal_c walked at 0.03 and 0.035, solo12 fell at 0.03 (session 28 audit), go2 at 0.04
+WALKED_DT = (0.008, 0.025)
 # 20 and 24 walked; 16 walked in lockstep but fell in real time (3.4-3.8 s, 3 of 3 runs,
 # session 20); 12 fell
 WALKED_MIN_NODES = 20
-WALKED_MAX_NODES_PER_TICK = 5  # 10 Hz at dt 0.02 walked; 5 Hz (10 nodes a tick) fell
+# 25 Hz at dt 0.02 (2 nodes a tick) walked the default profile (go2, a1, solo12); 10 Hz (5)
+# fell: go2 at 12.4 s (2 of 2), a1 at 4.2 s, anymal_c at 2.6 s (solo12 walked); 5 Hz (10)
+# fell (session 28 audit; 10 Hz had walked go2's shorter forward-and-turn run)
+WALKED_MAX_NODES_PER_TICK = 2
 # the trot, direct lockstep loop at 0.3 m/s for 5 s (session 23): step durations 0.15-0.7 s
 # walked (0.1 fell at 4.3 s, 0.8 at 2.6 s), duty factors 0.15-0.9 (0.1 fell at 2.6 s);
 # weights up to ~1000x their library defaults (base_position at 1000x, posture at 1e4x,
@@ -162,24 +167,29 @@ def horizon_for_rate(dt: float, n_nodes: int, control_rate: float) -> tuple[floa
     return period, max(2, round(n_nodes * dt / period))
 
 
-def timing_warnings(dt: float, n_nodes: int, period: float, publish_points: int,
-                    trigger: str = "timer") -> list[str]:
+def timing_warnings(dt: float, n_nodes: int, period: float, publish_points: int
+                    ) -> list[str]:
     """What in these timing settings is outside where the walking MPC was seen to walk, or
-    cannot work: a trajectory shorter than a control period (the robot has no plan until
-    the next tick). ``period``: the control period (s); empty when all is well."""
+    cannot work: a trajectory that ends before the next tick (its last point, at
+    ``(publish_points - 1) dt``, before the control period: the robot has no plan until
+    then). ``period``: the control period (s), with trigger 'state' too (the preparation is
+    for one period later, and a lockstep simulator steps by it); empty when all is well.
+    Until session 28 the first two were said with trigger 'timer' only, and a trajectory
+    of 5 points at 10 Hz (4 intervals, 0.08 s) passed."""
     out = []
-    if trigger == "timer" and publish_points * dt < period - 1e-9:
+    if (publish_points - 1) * dt < period - 1e-9:
         need = math.ceil(period / dt - 1e-9) + 1
-        out.append(f"the published trajectory ({publish_points} points x dt {dt:g} s) ends "
-                   f"before the next tick ({period:g} s later): the robot has no plan in "
+        out.append(f"the published trajectory ({publish_points} points, dt {dt:g} s apart) "
+                   f"ends before the next tick ({period:g} s later): the robot has no plan in "
                    f"between; set publish_points >= {need}")
-    if trigger == "timer" and period > WALKED_MAX_NODES_PER_TICK * dt + 1e-9:
+    if period > WALKED_MAX_NODES_PER_TICK * dt + 1e-9:
         out.append(f"control_rate {1 / period:g} Hz moves the horizon {period / dt:.3g} nodes a "
-                   f"tick: go2 walked with up to {WALKED_MAX_NODES_PER_TICK} (10 Hz at dt "
-                   "0.02 s) and flipped over with 10 (5 Hz)")
+                   f"tick: robots walked with up to {WALKED_MAX_NODES_PER_TICK} (25 Hz at dt "
+                   "0.02 s); with 5 (10 Hz) go2, a1 and anymal_c fell, with 10 (5 Hz) go2 "
+                   "flipped over")
     if not WALKED_DT[0] - 1e-12 <= dt <= WALKED_DT[1] + 1e-12:
-        out.append(f"dt {dt:g} s: go2 walked with {WALKED_DT[0]:g}-{WALKED_DT[1]:g} s and fell "
-                   "with 0.04 s")
+        out.append(f"dt {dt:g} s: every robot tried walked with {WALKED_DT[0]:g}-"
+                   f"{WALKED_DT[1]:g} s (solo12 fell with 0.03 s, go2 with 0.04 s)")
     if n_nodes < WALKED_MIN_NODES:
         out.append(f"n_nodes {n_nodes}: go2 walked with {WALKED_MIN_NODES}-24 nodes (dt "
                    "0.02 s); with 16 it fell in real time (it walked in lockstep), with 12 "
