@@ -202,3 +202,28 @@ def test_a_solved_barrier_problem_stops_instead_of_running_to_max_iter():
     else:
         assert st.success
     assert st.iterations < 500
+
+
+def test_an_infeasible_fixed_initial_state_is_said_so_with_the_barrier_too():
+    """The barrier's 'stationary: ... rows past their bounds' was reported for a node 0 no
+    relaxation makes feasible (the augmented Lagrangian said infeasible; session 28)."""
+    import casadi as cs
+
+    from horizon_mpc.problem import Problem
+
+    statuses = {}
+    for mode in ("lagrangian", "barrier"):
+        prb = Problem(30)
+        x = prb.create_state_variable("x", 2)
+        u = prb.create_input_variable("u", 1)
+        prb.set_dynamics(cs.vertcat(x[1], u))
+        prb.set_dt(0.05)
+        x.set_bounds([0.0, 1.0], [0.0, 1.0], nodes=0)  # v0 = 1 beyond |v| <= 0.5
+        prb.create_constraint("speed", x[1], bounds=(-0.5, 0.5))
+        prb.create_cost("effort", u, weight=0.1)
+        prb.create_final_cost("goal", x - [1.0, 0.0], weight=10.0)
+        solver = make_solver("ilqr", prb, {"inequality": mode})
+        assert not solver.solve()
+        statuses[mode] = solver.stats.status
+    assert statuses == dict.fromkeys(
+        statuses, "infeasible: the fixed initial state violates constraints at node 0")

@@ -95,3 +95,63 @@ def test_a_feedback_step_that_is_not_finite_leaves_the_guesses_alone():
     assert solver.stats.status == "feedback: initial state not finite"
     assert not solver.stats.success
     np.testing.assert_array_equal(prb.stacked("state"), before)
+
+
+def _swing_up(u_max: float):
+    """Pendulum swing-up with an active input bound (as test_ilqr_box's), solved."""
+    import casadi as cs
+
+    from horizon_mpc.examples.pendulum import pendulum_dynamics
+    from horizon_mpc.problem import Problem
+
+    prb = Problem(60)
+    x = prb.create_state_variable("x", 2)
+    u = prb.create_input_variable("u", 1)
+    prb.set_dynamics(cs.vertcat(x[1], pendulum_dynamics(x[0], x[1], u)))
+    prb.set_dt(0.05)
+    x.set_bounds([0, 0], [0, 0], nodes=0)
+    u.set_bounds(-u_max, u_max)
+    prb.create_cost("effort", u, weight=0.1)
+    prb.create_final_constraint("upright", x - [np.pi, 0])
+    solver = make_solver("ilqr", prb)
+    assert solver.solve()
+    solver.shift()
+    return prb, solver
+
+
+def test_the_split_is_the_real_time_iteration_whatever_the_rti_option():
+    """With rti False (the default) prepare() set up a converging solve (its 'auto' box, no
+    equality rows projected onto bounded inputs): another plan than the real-time solve
+    (cost 78.24 against 82.65, inputs 0.52 apart; session 28 audit)."""
+    split, whole = _swing_up(5.0), _swing_up(5.0)
+    x_meas = split[0].stacked("state")[:, 0] + np.array([0.05, -0.1])
+    for prb, _ in (split, whole):
+        prb.get_variable("x").set_bounds(x_meas, x_meas, nodes=0)
+    assert not split[1].opts["rti"]
+    split[1].prepare()
+    split[1].feedback(x_meas)
+    assert not split[1].opts["rti"]  # the option is left as it was
+    whole[1].set_option("rti", True)
+    whole[1].solve()
+    np.testing.assert_allclose(split[1].solution["u"], whole[1].solution["u"], rtol=1e-9,
+                               atol=1e-10)
+    assert split[1].stats.cost == pytest.approx(whole[1].stats.cost, rel=1e-9)
+
+
+def test_a_failed_call_reports_no_iteration_of_the_call_before():
+    """A failed solve, prepare or feedback kept the previous call's iterations, history and
+    time (an MPC logging its stats reported a failed tick with the last one's)."""
+    prb, solver = _warm_cartpole()
+    assert solver.stats.iterations == 4
+    q = prb.get_variable("q")
+    guess = q.initial_guess.copy()
+    guess[0, 5] = np.nan
+    q.set_initial_guess(guess)
+    assert not solver.solve()
+    st = solver.stats
+    assert (st.iterations, st.history, st.status) == (0, [], "initial guess not finite")
+    assert st.time < 1.0
+    guess[0, 5] = 0.0
+    q.set_initial_guess(guess)
+    assert solver.prepare() and not solver.feedback(np.full(4, np.nan))
+    assert (st.iterations, st.history) == (0, []) and np.isnan(st.cost)

@@ -539,6 +539,9 @@ def test_options_of_the_wrong_type_are_refused_by_name(prb, name, opts, match):
     ("ipopt", {"constr_viol_tol": float("nan")}, "'constr_viol_tol' .* must be >0"),
     ("ipopt", {"print_level": 99}, "'print_level' .* must be \\[0,12\\]"),
     ("ilqr", {"mu_max": 1e-12}, "mu_min 1e-10 is above mu_max 1e-12"),
+    # a regularisation started outside its range ran there (session 28 audit)
+    ("ilqr", {"mu_init": 1e11}, r"mu_init 1e\+11 is outside \[mu_min, mu_max\]"),
+    ("ilqr", {"mu_init": 1e-12}, r"mu_init 1e-12 is outside \[mu_min, mu_max\] = \[1e-10"),
 ])
 def test_options_out_of_their_range_are_refused_by_name(prb, name, opts, match):
     """rho_init 0 ended a solve in 'linearisation not finite', regularization -1 in a QP

@@ -174,6 +174,11 @@ class IlqrSolver(Solver):
         for lo, hi in (("mu_min", "mu_max"), ("rho_init", "rho_max")):
             if opts[lo] > opts[hi]:
                 raise ValueError(f"ilqr options: {lo} {opts[lo]!r} is above {hi} {opts[hi]!r}")
+        # a regularisation started outside its range ran there (1e3 above mu_max 1: 101
+        # iterations for 86; 1e-12 below mu_min 1e-6 was taken as is)
+        if not opts["mu_min"] <= opts["mu_init"] <= opts["mu_max"]:
+            raise ValueError(f"ilqr options: mu_init {opts['mu_init']:g} is outside [mu_min, "
+                             f"mu_max] = [{opts['mu_min']:g}, {opts['mu_max']:g}]")
         if opts["callback"] is not None and not callable(opts["callback"]):
             raise TypeError(f"ilqr option 'callback' must be callable (called with a dict per "
                             f"iteration) or None, got {opts['callback']!r}")
@@ -776,7 +781,7 @@ class IlqrSolver(Solver):
         t_start = time.perf_counter()
         ev = self._begin_call()
         if ev is None:
-            self.stats.success, self.stats.status = False, self._not_finite_status()
+            self._failed_call(self._not_finite_status(), t_start)
             self._publish(ev)
             return False
         rti = bool(o["rti"])
@@ -869,12 +874,15 @@ class IlqrSolver(Solver):
         if stationary and ev["viol"] <= o["tol_constraint"] and (
                 self._complementarity(ev) <= o["tol_complementarity"]):
             return "converged"
+        # an infeasible node 0 before the barrier's relaxation: no step moves it (the
+        # barrier's status was reported for it, its rows elsewhere relaxed past the bounds)
+        if stationary and ev["viol_fixed"] > o["tol_constraint"] and (
+                self._al.barrier or ev["viol_free"] <= o["tol_constraint"]):
+            return "infeasible: the fixed initial state violates constraints at node 0"
         if stationary and self._al.barrier and ev["viol_eq"] <= o["tol_constraint"]:
             # the barrier problem is solved; what its rows are still past their bounds is
             # its relaxation, which more iterations do not change
             return "stationary: the barrier's optimum, inequality rows past their bounds"
-        if stationary and ev["viol_free"] <= o["tol_constraint"] < ev["viol_fixed"]:
-            return "infeasible: the fixed initial state violates constraints at node 0"
         if info.get("backward_failed"):
             return "regularisation limit reached"
         if info.get("linearisation_failed"):
@@ -894,6 +902,14 @@ class IlqrSolver(Solver):
         if dropped:
             log.info("ilqr: %d constraint row(s) ended with multipliers above rho_max (%g): "
                      "the next solve starts them at zero", dropped, rho_max)
+
+    def _failed_call(self, status: str, t_start: float) -> None:
+        """Stats of a call that ran no iteration: none of the previous call's iterations,
+        history or time (a failed tick was logged with the last one's)."""
+        st = self.stats
+        st.success, st.status = False, status
+        st.iterations, st.history = 0, []
+        st.time = time.perf_counter() - t_start
 
     def _publish(self, ev) -> None:
         self.stats.cost = ev["cost"] if ev else math.nan
@@ -915,24 +931,31 @@ class IlqrSolver(Solver):
         :meth:`feedback` then ends the iteration from the measured state: rollout of the
         feedback law, line search, multiplier update. Returns False when no step could be
         prepared (warm start or linearisation not finite, regularisation limit);
-        ``stats.status`` says why.
+        ``stats.status`` says why. The setup is a real-time call's whatever the ``rti``
+        option (with ``rti`` False it was a converging solve's: its 'auto' box and no
+        equality rows projected onto bounded inputs, another plan than the real-time
+        iteration the split stands for).
         """
         self.check_problem_unchanged()
         self.prb.check_dt_values()
         t_start = time.perf_counter()
-        ev = self._begin_call()
-        if ev is None:
-            self.stats.success = False  # not the last solve's
-            self.stats.status = f"prepare: {self._not_finite_status()}"
-            return False
-        info = self._new_info()
-        lq = self._lq_step(ev, info)
+        rti, self.opts["rti"] = self.opts["rti"], True
+        try:
+            ev = self._begin_call()
+            if ev is None:
+                self._failed_call(f"prepare: {self._not_finite_status()}", t_start)
+                self.stats.cost = self.stats.constraint_violation = math.nan
+                return False
+            info = self._new_info()
+            lq = self._lq_step(ev, info)
+        finally:
+            self.opts["rti"] = rti
         self._time("prepare", time.perf_counter() - t_start)
         if lq is None:
-            self.stats.success = False
-            self.stats.status = ("prepare: regularisation limit reached"
-                                 if info.get("backward_failed") else
-                                 "prepare: linearisation not finite")
+            self._failed_call("prepare: regularisation limit reached"
+                              if info.get("backward_failed") else
+                              "prepare: linearisation not finite", t_start)
+            self.stats.cost, self.stats.constraint_violation = ev["cost"], ev["viol"]
             return False
         self._prepared = (ev, *lq, info)
         return True
@@ -976,7 +999,8 @@ class IlqrSolver(Solver):
         self._prepared = None
         st = self.stats
         if not np.all(np.isfinite(x0)):
-            st.success, st.status = False, "feedback: initial state not finite"
+            self._failed_call("feedback: initial state not finite", t_start)
+            st.cost = st.constraint_violation = math.nan
             return False
         dx0 = self._difference(self.X[0], x0)[0].reshape(m.ndx).copy()
         # the prepared evaluation, with node 0 now fixed at x0
