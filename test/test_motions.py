@@ -155,6 +155,26 @@ def test_motion_settings_come_from_the_file_with_per_robot_overrides():
     assert mc.settings_for(LeapSettings, "solo12").dt == 0.05
 
 
+def test_mapping_settings_merge_key_by_key_and_none_is_taken_where_it_is_a_value():
+    """--set mpc={gait: {name: trot}} replaced walk.yaml's whole mpc mapping: its 40 nodes
+    became the robot's 24 without a word; trunk_clearance null (documented: no clearance)
+    was refused as not a number (session 28 audit)."""
+    from horizon_mpc.motions.walk import WalkSettings
+
+    walk = load_motion_config("walk")
+    st = walk.settings_for(WalkSettings, "go2", {"mpc": {"gait": {"name": "walk"}}})
+    assert st.mpc["n_nodes"] == 40 and st.mpc["gait"]["name"] == "walk"
+    mc = MotionConfig("m", "go2", "ipopt", {"mpc": {"gait": {"name": "trot",
+                                                               "step_duration": 0.3}}}, {})
+    st = mc.settings_for(WalkSettings, "go2", {"mpc": {"gait": {"step_height": 0.05}}})
+    assert st.mpc == {"gait": {"name": "trot", "step_duration": 0.3, "step_height": 0.05}}
+    leap = load_motion_config("leap")
+    assert leap.settings_for(LeapSettings, "go2", {"trunk_clearance": None}).trunk_clearance \
+        is None
+    with pytest.raises(ValueError, match="'distance' must be a number, got None"):
+        leap.settings_for(LeapSettings, "go2", {"distance": None})
+
+
 def test_unknown_motion_setting_names_the_known_ones():
     mc = load_motion_config("leap")
     with pytest.raises(ValueError, match="distance"):
@@ -764,6 +784,23 @@ def test_outputs_hold_the_solution_figures_animation_and_summary(walk, tmp_path)
     files = write_outputs(res, load_robot_config("go2"), tmp_path, animation=False)
     assert not (tmp_path / "animation.gif").exists() and "animation" not in files
     assert "animation" not in json.loads(files["summary"].read_text())["files"]
+    # a run interrupted while writing (after its solution) leaves none of the earlier run's
+    # summary or plots beside it (session 28 audit: a go2 solution beside a laikago summary)
+    write_outputs(res, load_robot_config("go2"), tmp_path, animation=False)
+
+    def interrupted(*_args, **_kwargs):
+        raise KeyboardInterrupt
+
+    from horizon_mpc.motions import plots
+
+    original = plots.plot_contact_forces
+    plots.plot_contact_forces = interrupted
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            write_outputs(res, load_robot_config("go2"), tmp_path, animation=False)
+    finally:
+        plots.plot_contact_forces = original
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["solution.npz"]
 
 
 @pytest.mark.slow
@@ -819,3 +856,31 @@ def test_verbose_prints_the_solvers_iterations_as_they_go(tmp_path, capsys):
                  "--out", str(tmp_path)]) == 0
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("ilqr: ")]
     assert len(lines) > 3, lines  # the first horizon's iterations, then the ticks'
+
+
+def test_a_leap_replay_that_ends_collapsed_is_not_within_tolerance():
+    """anymal_c's replay ended 26.5 cm low and pitched 0.37 rad and was reported as landing
+    8 cm off target only (session 28 audit): the summary says whether it ended standing."""
+    from types import SimpleNamespace
+
+    from horizon_mpc.motions.cli import _replay_warning
+    from horizon_mpc.motions.replay import ReplayResult, replay_summary
+
+    q = np.zeros((19, 5))
+    q[2] = 0.5  # the plan ends at its start height
+    plan = SimpleNamespace(q=q)
+
+    def rep(dz, pitch, dx=0.40):
+        return ReplayResult(np.zeros(1), np.zeros((1, 19)), np.zeros((1, 4)),
+                            np.array([dx, 0.0, dz]), np.array([0.0, pitch, 0.0]), abs(pitch))
+
+    ok = replay_summary(rep(-0.01, 0.05), plan, 0.4)
+    assert ok["ended_standing"] and ok["within_tolerance"]
+    assert ok["height_error"] == pytest.approx(-0.01)
+    fallen = replay_summary(rep(-0.265, 0.365, dx=0.467), plan, 0.4)
+    assert not fallen["ended_standing"] and not fallen["within_tolerance"]
+    assert "did not end standing: its base 26.5 cm below the plan's final height" in (
+        _replay_warning(fallen))
+    long = replay_summary(rep(0.0, 0.0, dx=0.477), plan, 0.4)
+    assert long["ended_standing"] and not long["within_tolerance"]
+    assert "lands 0.077 m from its target" in _replay_warning(long)

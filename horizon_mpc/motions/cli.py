@@ -23,7 +23,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
 import yaml
 
 if TYPE_CHECKING:  # the heavy modules are imported when a motion runs
@@ -54,11 +53,6 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true",
                    help="debug logging and the solver's iterations as they go")
     return p
-
-
-# m: a leap whose open-loop PyBullet replay lands further than this from the target is
-# reported (the 0.4 m go2 leap lands 7.7 cm long, solo12's 0.25 m one 4.5 cm long)
-REPLAY_TOLERANCE = 0.05
 
 
 def _overrides(items: Sequence[str]) -> dict:
@@ -221,17 +215,12 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
     wall = time.perf_counter() - t0
     extra = {"settings": dataclasses.asdict(settings), "wall_time": wall}
     if args.motion == "leap" and not args.no_replay:
-        from horizon_mpc.motions.replay import replay
+        from horizon_mpc.motions.replay import replay, replay_summary
 
         rep = replay(res, cfg, model.pin_model, settings.replay_kp, settings.replay_kd)
-        target = np.array([float(res.summary["target"][0] - res.q[0, 0]), 0.0])
         extra["pybullet_replay"] = {
             "kp": settings.replay_kp, "kd": settings.replay_kd,
-            "displacement": rep.displacement.tolist(), "target_displacement": target.tolist(),
-            "landing_error": float(np.linalg.norm(rep.displacement[:2] - target)),
-            "final_roll_pitch_yaw": rep.final_rpy.tolist(), "max_tilt": rep.max_tilt}
-        extra["pybullet_replay"]["within_tolerance"] = bool(
-            extra["pybullet_replay"]["landing_error"] <= REPLAY_TOLERANCE)
+            **replay_summary(rep, res, float(res.summary["target"][0] - res.q[0, 0]))}
     render = {"yaw": 90.0} if args.motion == "leap" else {}
     _checkpoint()
     files = write_outputs(res, cfg, out, effort_limit=model.joint_effort_limit,
@@ -254,11 +243,25 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
             print("  (the replay is of a plan the solver did not solve: no guide to how a "
                   "solved leap lands)")
         elif not extra["pybullet_replay"]["within_tolerance"]:
-            print(f"  WARNING: replayed open loop in PyBullet (joint PD on the plan), the leap "
-                  f"lands {extra['pybullet_replay']['landing_error']:.3f} m from its target "
-                  f"(> {REPLAY_TOLERANCE} m): the plan is not one this simulated robot "
-                  "follows without feedback (replay_kp/replay_kd, or a shorter leap)")
+            print(f"  WARNING: {_replay_warning(extra['pybullet_replay'])}: the plan is not one "
+                  "this simulated robot follows without feedback (replay_kp/replay_kd, or a "
+                  "shorter leap)")
     return 0 if ok else 1
+
+
+def _replay_warning(rep: dict) -> str:
+    """What went wrong in a leap's replay (``replay_summary``'s figures), in words."""
+    from horizon_mpc.motions.replay import REPLAY_TOLERANCE
+
+    text = "replayed open loop in PyBullet (joint PD on the plan), the leap "
+    if not rep["ended_standing"]:
+        roll, pitch = rep["final_roll_pitch_yaw"][:2]
+        return (text + f"did not end standing: its base {abs(rep['height_error']) * 100:.1f} "
+                f"cm {'below' if rep['height_error'] < 0 else 'above'} the plan's final height, "
+                f"roll {roll:.2f} rad, pitch {pitch:.2f} rad (landed "
+                f"{rep['landing_error']:.3f} m from its target)")
+    return (text + f"lands {rep['landing_error']:.3f} m from its target (> {REPLAY_TOLERANCE} "
+            "m)")
 
 
 if __name__ == "__main__":

@@ -26,7 +26,11 @@ import numpy as np
 from horizon_mpc.config import RobotConfig
 from horizon_mpc.motions.result import MotionResult
 
-__all__ = ["load_solution", "write_outputs", "write_solution", "write_summary"]
+__all__ = ["OUTPUT_FILES", "load_solution", "write_outputs", "write_solution", "write_summary"]
+
+#: what :func:`write_outputs` writes (the summary last: a folder without it is incomplete)
+OUTPUT_FILES = ("solution.npz", "contact_forces.png", "base_and_torques.png", "animation.gif",
+                "summary.json")
 
 log = logging.getLogger(__name__)
 
@@ -88,18 +92,22 @@ def write_outputs(res: MotionResult, cfg: RobotConfig, out: str | Path,
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    # an earlier run's outputs go first: a run interrupted while writing left its solution
+    # beside the earlier run's summary and plots, nothing telling them apart
+    earlier = [p for p in (out / name for name in OUTPUT_FILES) if p.is_file()]
+    for path in earlier:
+        path.unlink()
+    if earlier:
+        log.info("%s: removed the earlier run's %s in %s", res.motion,
+                 ", ".join(p.name for p in earlier), out)
     files = {"solution": write_solution(res, out / "solution.npz"),
              "contact_forces": plot_contact_forces(res, out / "contact_forces.png"),
              "base_and_torques": plot_base_and_torques(res, out / "base_and_torques.png",
                                                        effort_limit)}
-    gif = out / "animation.gif"
     if animation:
         from horizon_mpc.motions.animation import write_animation
 
-        files["animation"] = write_animation(res, cfg, gif, **render)
-    elif gif.is_file():  # an earlier run's animation would pass for this motion's
-        gif.unlink()
-        log.info("%s: removed the earlier run's %s (no animation this run)", res.motion, gif)
+        files["animation"] = write_animation(res, cfg, out / "animation.gif", **render)
     files["summary"] = write_summary(
         res, out / "summary.json",
         {**(extra or {}), "files": {k: p.name for k, p in files.items()}})

@@ -47,8 +47,8 @@ class MotionConfig:
                 or a value of another kind than the setting's default (a number where a
                 whole number is due, text for a number, ...: named with the key).
         """
-        values = {**self.settings, **self.robots.get(robot or self.robot, {}),
-                  **(overrides or {})}
+        values = _merged(self.settings, self.robots.get(robot or self.robot, {}),
+                         overrides or {})
         fields = {f.name: f for f in dataclasses.fields(cls)}
         unknown = sorted(set(values) - set(fields))
         if unknown:
@@ -60,16 +60,34 @@ class MotionConfig:
                     f" (a config of the {self.motion!r} motion?)")
             raise ValueError(f"{where}: unknown setting(s) {given or unknown} for motion "
                              f"{motion!r}{hint}; known: {sorted(fields)}")
-        return cls(**{k: _checked_value(k, v, field_default(fields[k])) for k, v in values.items()})
+        return cls(**{k: _checked_value(k, v, field_default(fields[k]),
+                                        "None" in str(fields[k].type))
+                      for k, v in values.items()})
 
 
-def _checked_value(key: str, value: Any, default: Any) -> Any:
+def _merged(*layers: dict[str, Any]) -> dict[str, Any]:
+    """The settings of ``layers``, later ones over earlier ones key by key, mappings merged
+    the same way (``--set mpc={gait: {name: walk}}`` changes the gait's name only: it
+    replaced the config's whole ``mpc`` mapping, and the walk's 40 nodes became 24)."""
+    out: dict[str, Any] = {}
+    for layer in layers:
+        for key, value in layer.items():
+            if isinstance(value, dict) and isinstance(out.get(key), dict):
+                value = _merged(out[key], value)
+            out[key] = value
+    return out
+
+
+def _checked_value(key: str, value: Any, default: Any, nullable: bool = False) -> Any:
     """``value`` as the kind of ``default`` (an int for an int setting, a float for a float
     one, a list for a list one); ValueError naming ``key`` otherwise. Settings without a
-    default (or a None one) are passed as given."""
+    default (or a None one) are passed as given; so is None for a setting whose type allows
+    it (``nullable``: the leap's ``trunk_clearance``, None for no clearance)."""
     def bad(kind: str) -> ValueError:
         return ValueError(f"setting {key!r} must be {kind}, got {value!r}")
 
+    if value is None and nullable:
+        return None
     is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
     if isinstance(default, bool):
         if not isinstance(value, bool):
