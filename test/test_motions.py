@@ -884,3 +884,27 @@ def test_a_leap_replay_that_ends_collapsed_is_not_within_tolerance():
     long = replay_summary(rep(0.0, 0.0, dx=0.477), plan, 0.4)
     assert long["ended_standing"] and not long["within_tolerance"]
     assert "lands 0.077 m from its target" in _replay_warning(long)
+
+
+def test_the_python_api_defaults_to_the_settings_the_cli_runs(monkeypatch):
+    """run_turn() built the whole 39-joint CENTAURO (the file locks its arms and wheels),
+    run_walk() 24 nodes (the file: 40), run_leap('solo12') 0.4 m (the file: 0.25)."""
+    from horizon_mpc.motions import walk as walk_module
+    from horizon_mpc.motions.settings import motion_settings
+    from horizon_mpc.motions.turn import TurnSettings
+    from horizon_mpc.motions.walk import WalkSettings
+
+    assert motion_settings("turn", TurnSettings, "centauro").locked_joints
+    assert motion_settings("walk", WalkSettings, "go2").mpc["n_nodes"] == 40
+    assert motion_settings("leap", LeapSettings, "solo12").distance == pytest.approx(0.25)
+    asked = []
+
+    def short(motion, cls, robot):
+        asked.append((motion, cls, robot))
+        st = motion_settings(motion, cls, robot)
+        st.duration = 0.06
+        return st
+
+    monkeypatch.setattr(walk_module, "motion_settings", short)
+    res = walk_module.run_walk("go2")
+    assert asked == [("walk", WalkSettings, "go2")] and res.n_nodes == 3

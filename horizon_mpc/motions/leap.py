@@ -26,7 +26,7 @@ from horizon_mpc.motions.analysis import (
 from horizon_mpc.motions.body import point_heights, trunk_points
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import timeline_schedule
-from horizon_mpc.motions.settings import check_settings
+from horizon_mpc.motions.settings import check_settings, motion_settings
 from horizon_mpc.motions.wholebody import (
     WholeBodyProblem,
     build_whole_body,
@@ -228,9 +228,11 @@ def leap_summary(res: MotionResult, lp: LeapProblem, model: RobotModel) -> dict:
 def run_leap(robot: str | RobotConfig = "go2", solver: str = "ipopt",
              settings: LeapSettings | None = None, opts: dict | None = None,
              model: RobotModel | None = None) -> MotionResult:
-    """Build and solve the leap; the result's ``summary`` holds :func:`leap_summary`."""
+    """Build and solve the leap; the result's ``summary`` holds :func:`leap_summary`.
+    Without ``settings``, those of ``config/motions/leap.yaml`` for the robot (as the
+    ``motion`` CLI)."""
     cfg = load_robot_config(robot) if isinstance(robot, str) else robot
-    settings = settings or LeapSettings()
+    settings = settings or motion_settings("leap", LeapSettings, cfg.name)
     model = model or robot_model(cfg, settings.locked_joints)
     lp = build_leap(model, cfg, settings)
     res = lp.wb.solve(solver, opts, motion="leap", robot=cfg.name)

@@ -21,7 +21,7 @@ from typing import Any, TypeVar
 
 from horizon_mpc.config import check_settings, field_default, find_config_file, read_yaml
 
-__all__ = ["MotionConfig", "check_settings", "load_motion_config"]
+__all__ = ["MotionConfig", "check_settings", "load_motion_config", "motion_settings"]
 
 T = TypeVar("T")
 SOLVERS = ("ipopt", "gnsqp", "ilqr")
@@ -141,3 +141,11 @@ def load_motion_config(motion: str | Path) -> MotionConfig:
         robots={str(k): dict(v or {}) for k, v in robots.items()},
         source=path,
     )
+
+
+def motion_settings(motion: str, cls: type[T], robot: str) -> T:
+    """The settings ``motion <motion> --robot <robot>`` runs with: ``cls`` filled from
+    ``config/motions/<motion>.yaml`` for ``robot`` (the Python API's default: ``run_turn()``
+    built the whole 39-joint CENTAURO, ``run_walk()`` 24 nodes, ``run_leap('solo12')`` leapt
+    0.4 m where the file says 0.25)."""
+    return load_motion_config(motion).settings_for(cls, robot)

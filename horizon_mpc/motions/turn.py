@@ -26,7 +26,7 @@ from horizon_mpc.motions.analysis import (
 )
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import crawl_order, timeline_schedule
-from horizon_mpc.motions.settings import check_settings
+from horizon_mpc.motions.settings import check_settings, motion_settings
 from horizon_mpc.motions.wholebody import (
     WholeBodyProblem,
     build_whole_body,
@@ -185,9 +185,11 @@ def turn_summary(res: MotionResult, tp: TurnProblem, model: RobotModel,
 def run_turn(robot: str | RobotConfig = "centauro", solver: str = "ipopt",
              settings: TurnSettings | None = None, opts: dict | None = None,
              model: RobotModel | None = None) -> MotionResult:
-    """Build and solve the turn; the result's ``summary`` holds :func:`turn_summary`."""
+    """Build and solve the turn; the result's ``summary`` holds :func:`turn_summary`.
+    Without ``settings``, those of ``config/motions/turn.yaml`` for the robot (as the
+    ``motion`` CLI)."""
     cfg = load_robot_config(robot) if isinstance(robot, str) else robot
-    settings = settings or TurnSettings()
+    settings = settings or motion_settings("turn", TurnSettings, cfg.name)
     model = model or robot_model(cfg, settings.locked_joints)
     tp = build_turn(model, cfg, settings)
     res = tp.wb.solve(solver, opts, motion="turn", robot=cfg.name)

@@ -27,7 +27,7 @@ from horizon_mpc.model import RobotModel
 from horizon_mpc.motions.analysis import foot_heights, physics_summary, swing_intervals
 from horizon_mpc.motions.result import MotionResult
 from horizon_mpc.motions.schedule import touchdown_nodes
-from horizon_mpc.motions.settings import check_settings
+from horizon_mpc.motions.settings import check_settings, motion_settings
 from horizon_mpc.motions.wholebody import robot_model
 from horizon_mpc.problem.terms import term_name
 from horizon_mpc.solvers import make_solver
@@ -97,10 +97,11 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
     Returns the executed motion: states on every tick (``q``, ``v``: (n, T+1)), the first
     input of each solution (``a``, ``f``, ``tau``: (n, T)), the stance of each tick, and in
     ``arrays``: ``v_ref`` (6,), per-tick ``tick_time`` (s), ``iterations`` and
-    ``violation``; ``summary`` holds :func:`walk_summary`.
+    ``violation``; ``summary`` holds :func:`walk_summary`. Without ``settings``, those of
+    ``config/motions/walk.yaml`` for the robot (as the ``motion`` CLI).
     """
-    st = settings or WalkSettings()
     cfg = load_robot_config(robot) if isinstance(robot, str) else robot
+    st = settings or motion_settings("walk", WalkSettings, cfg.name)
     model = model or robot_model(cfg)
     mpc = MpcSettings.from_dict({**cfg.section("mpc"), **st.mpc})
     wp = build_walking_problem(model, cfg, mpc)
