@@ -740,3 +740,84 @@ def test_failed_ticks_are_logged_once_per_burst_and_at_most_every_two_seconds(mo
     assert lines[-1] == ("ILQR failed (rti): back to the standing warm start (9 more bursts "
                          "of failures before it)")
     assert mpc.failures == 1
+
+
+# --------------------------------------------------------------------------------------------
+# session 28 audit of the library API
+
+
+def test_prepare_for_a_time_before_the_last_tick_is_refused(walking_mpc):
+    """It moved the controller's time back: the next update took the gap as elapsed, and
+    solo12 ran 0.55 m/s for a 0.2 command."""
+    plans = list(_perfect_model_ticks(walking_mpc, [(0.2, 0.0, 0.0)] * 5))
+    t = walking_mpc.t_last
+    with pytest.raises(ValueError, match="before the last tick's"):
+        walking_mpc.prepare(t - 0.5, np.array([0.2, 0.0, 0.0]))
+    assert walking_mpc.t_last == t and walking_mpc.prepared_for is None
+    assert walking_mpc.prepare(t + walking_mpc.settings.dt, np.array([0.2, 0.0, 0.0]))
+    assert plans[-1].t0 == pytest.approx(t)
+
+
+def test_walking_settings_are_checked_by_key_when_they_are_read():
+    """Weights, flags and choices were taken as given and failed at the build naming a cost
+    (or nothing: 'could not convert string to float'), a quoted "false" was a true flag."""
+    from horizon_mpc.locomotion import MpcSettings
+
+    for data, match in (
+            ({"weights": {"swing_height": -5.0}}, "'mpc.weights.swing_height' must be a finite"),
+            ({"weights": {"force": "x"}}, "'mpc.weights.force' must be a finite number"),
+            ({"weights": {"posture": float("nan")}}, "'mpc.weights.posture'"),
+            ({"weights": {"base_linear_velocity": [1, 2]}},
+             r"'mpc.weights.base_linear_velocity' must be 3 numbers >= 0"),
+            ({"weights": {"base_linear_velocity": 5.0}}, "must be 3 numbers"),
+            ({"stand_when_idle": "false"}, "'mpc.stand_when_idle' must be true or false"),
+            ({"torque_limits": 0}, "'mpc.torque_limits' must be true or false"),
+            ({"clearance": "bogus"}, r"'mpc.clearance' must be one of \['cost'"),
+            ({"inequality": "bogus"}, r"'mpc.inequality' must be one of \['barrier'"),
+            ({"gait": {"name": "gallop"}}, r"'mpc.gait.name' must be one of \['stand'"),
+            ({"gait": {"name": 3}}, "'mpc.gait.name' must be one of")):
+        with pytest.raises(ValueError, match=match):
+            MpcSettings.from_dict(data)
+    st = MpcSettings.from_dict({"weights": {"base_linear_velocity": [1, 2, 3.5]},
+                                "clearance": "none", "inequality": "lagrangian"})
+    assert st.weights.base_linear_velocity == [1, 2, 3.5]
+
+
+def test_gaits_refuse_what_they_cannot_be_and_a_stand_its_duty_factor(walking_mpc):
+    """n_feet 0 made a gait of no foot, a text step duration numpy's TypeError, and a
+    stand's duty factor 5.0 was stored (the settings were then invalid)."""
+    with pytest.raises(ValueError, match="at least one foot"):
+        make_gait("trot", n_feet=0)
+    with pytest.raises(ValueError, match="step_duration must be a number, got 'a'"):
+        make_gait("trot", step_duration="a")
+    with pytest.raises(ValueError, match="duty factor must be in"):
+        make_gait("stand", duty_factor=5.0)
+    assert make_gait("walk", n_feet=6).offsets == (0.0, 0.5, 0.75, 0.25, 0.0, 0.5)
+    g = walking_mpc.settings.gait
+    before = (g.name, g.duty_factor)
+    with pytest.raises(ValueError, match="duty factor"):
+        walking_mpc.set_gait("stand", duty_factor=5.0)
+    assert (g.name, g.duty_factor) == before
+    from horizon_mpc.mpc import WalkingMpc
+
+    with pytest.raises(ValueError, match="whole number >= 1, got 1.7"):
+        WalkingMpc("go2", iterations=1.7)
+
+
+def test_successive_ticks_agree_on_the_contacts_of_the_nodes_they_share():
+    """A node on a lift-off or touch-down came out on either side of it from one tick to
+    the next by the rounding of its time: 64 of 949 ticks (trot, 0.3 s steps)."""
+    for gait in (make_gait("trot", 0.3), make_gait("walk", 0.3), make_gait("trot", 0.35)):
+        dt, n = 0.02, 24
+        before = None
+        flips = 0
+        for k in range(400):
+            t0 = k * dt
+            stance = gait.schedule(t0, n, dt).stance
+            if before is not None:
+                flips += int(np.any(before[:, 1:] != stance[:, :-1]))
+            before = stance
+        assert flips == 0, (gait.name, gait.step_duration, flips)
+    walk = make_gait("walk", 0.3)
+    np.testing.assert_array_equal(walk.schedule(0.37, 24, 0.02).stance,
+                                  walk.schedule(0.37 + walk.period, 24, 0.02).stance)

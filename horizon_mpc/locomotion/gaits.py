@@ -39,11 +39,15 @@ class Gait:
         return np.inf if self.stands else self.step_duration / (1.0 - self.duty_factor)
 
     def phases(self, t: np.ndarray) -> np.ndarray:
-        """Phase in [0, 1) of each foot at times ``t``: shape (n_feet, len(t))."""
+        """Phase in [0, 1) of each foot at times ``t``: shape (n_feet, len(t)), rounded to
+        :data:`PHASE_DECIMALS` decimals: a node on a lift-off or a touch-down is on the same
+        side of it whatever rounding its time came with (1.30 s gave 0.49999999999999972 at
+        one tick and 0.5 at the next: the contact flipped between ticks on 64 of 949)."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if not np.isfinite(self.period):
             return np.zeros((len(self.offsets), t.size))
-        return np.mod(t[None, :] / self.period + np.asarray(self.offsets)[:, None], 1.0)
+        phase = t[None, :] / self.period + np.asarray(self.offsets)[:, None]
+        return np.mod(np.round(phase, PHASE_DECIMALS), 1.0)
 
     def schedule(self, t0: float, n_nodes: int, dt: float) -> ContactSchedule:
         """Contacts and swing progress on nodes ``t0 + k dt``, k = 0..n_nodes."""
@@ -53,6 +57,11 @@ class Gait:
         swing_progress = np.where(stance, 0.0,
                                   (ph - self.duty_factor) / max(1.0 - self.duty_factor, 1e-9))
         return ContactSchedule(stance, swing_progress, self.step_height)
+
+
+#: decimals a gait phase is rounded to (1e-9 of a cycle: far below a node, far above the
+#: rounding of node times)
+PHASE_DECIMALS = 9
 
 
 @dataclass
@@ -106,20 +115,32 @@ def make_gait(name: str, step_duration: float = 0.3, step_height: float = 0.08,
     """A gait from the library (``stand``, ``trot``, ``walk``, ``pace``, ``bound``, ``pronk``);
     ``duty_factor`` None: the gait's own (:data:`GAITS`: walk 0.75, the others 0.5).
 
+    The offsets are those of four feet in the order front left, front right, hind left,
+    hind right; another number of feet repeats them every four (foot ``i`` gets foot
+    ``i % 4``'s).
+
     Raises:
         ValueError: unknown name, a duration that is not a finite number > 0, a step height
-            that is not a finite number >= 0, a duty factor outside (0, 1].
+            that is not a finite number >= 0, a duty factor outside (0, 1] (also for
+            ``stand``, which ignores it), fewer than one foot.
     """
-    if name not in GAITS:
+    if not isinstance(name, str) or name not in GAITS:
         raise ValueError(f"unknown gait {name!r}; gaits are: {', '.join(GAITS)}")
+    for what, value in (("step_duration", step_duration), ("step_height", step_height),
+                        ("duty factor", duty_factor)):
+        if value is not None and (isinstance(value, bool)
+                                  or not isinstance(value, (int, float, np.number))):
+            raise ValueError(f"{what} must be a number, got {value!r}")
+    if duty_factor is not None and not 0.0 < duty_factor <= 1.0:
+        raise ValueError(f"duty factor must be in (0, 1], got {duty_factor}")
     offsets, beta = GAITS[name]
     beta = beta if duty_factor is None or name == "stand" else float(duty_factor)
-    if not 0.0 < beta <= 1.0:
-        raise ValueError(f"duty factor must be in (0, 1], got {beta}")
     if not (np.isfinite(step_duration) and step_duration > 0):
         raise ValueError(f"step_duration must be a finite number > 0, got {step_duration}")
     if not (np.isfinite(step_height) and step_height >= 0):
         raise ValueError(f"step_height must be a finite number >= 0, got {step_height}")
+    if isinstance(n_feet, bool) or not isinstance(n_feet, (int, np.integer)) or n_feet < 1:
+        raise ValueError(f"a gait needs at least one foot, got n_feet {n_feet!r}")
     if n_feet != 4:
         offsets = tuple(offsets[i % 4] for i in range(n_feet))
     return Gait(name, tuple(offsets), beta, float(step_duration), float(step_height))

@@ -10,14 +10,21 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+import numpy as np
+
 from horizon_mpc.config import RobotConfig, check_settings
 from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM
-from horizon_mpc.locomotion.gaits import Gait, make_gait
+from horizon_mpc.locomotion.gaits import GAITS, Gait, make_gait
 
 __all__ = ["MAX_COMMAND_NORM", "GaitSettings", "MpcSettings", "Weights", "config_gait"]
 
 #: the largest max_command_norm (>= sqrt(3) already leaves the per-axis limits alone)
 MAX_COMMAND_NORM = 10.0
+
+
+#: the walking problem's swing clearance and inequality treatments
+CLEARANCES = ("cost", "constraint", "none")
+INEQUALITIES = ("barrier", "lagrangian")
 
 
 @dataclass
@@ -34,6 +41,8 @@ class GaitSettings:
     def __post_init__(self) -> None:
         check_settings(self, positive=("step_duration",), non_negative=("step_height",),
                        prefix="mpc.gait.")
+        if self.name not in GAITS:
+            raise ValueError(f"'mpc.gait.name' must be one of {list(GAITS)}, got {self.name!r}")
         if self.duty_factor is not None and not (
                 isinstance(self.duty_factor, (int, float)) and not isinstance(
                     self.duty_factor, bool) and 0 < self.duty_factor <= 1):
@@ -75,6 +84,24 @@ class Weights:
     force: float = 1e-5
     swing_height: float = 500.0
     final_posture: float = 5.0
+
+    def __post_init__(self) -> None:
+        """Each weight a finite number >= 0, a per-row one as many as its default has
+        (they were checked when the problem was built, naming a cost and not the key:
+        ``force: "x"`` was 'could not convert string to float')."""
+        for f in fields(self):
+            value, default = getattr(self, f.name), f.default_factory() if callable(
+                f.default_factory) else f.default
+            name = f"mpc.weights.{f.name}"
+            if isinstance(default, list):
+                if not (isinstance(value, (list, tuple, np.ndarray)) and np.ndim(value) == 1
+                        and len(value) == len(default)
+                        and all(_number(x) and x >= 0 for x in value)):
+                    raise ValueError(f"setting {name!r} must be {len(default)} numbers >= 0 "
+                                     f"(one per row), got {value!r}")
+            elif not (_number(value) and value >= 0):
+                raise ValueError(f"setting {name!r} must be a finite number >= 0, got "
+                                 f"{value!r}")
 
 
 @dataclass
@@ -164,6 +191,15 @@ class MpcSettings:
                     _number(x) and x >= 0 for x in value)):
                 raise ValueError(f"'mpc.{name}' must be 3 numbers >= 0 (vx, vy, wz), got "
                                  f"{value!r}")
+        # flags and choices (a quoted "false" was a true flag; 'bogus' failed at the build)
+        for name in ("torque_limits", "stand_when_idle", "prepare_ahead"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"'mpc.{name}' must be true or false, got "
+                                 f"{getattr(self, name)!r}")
+        for name, choices in (("clearance", CLEARANCES), ("inequality", INEQUALITIES)):
+            if getattr(self, name) not in choices:
+                raise ValueError(f"'mpc.{name}' must be one of {list(choices)}, got "
+                                 f"{getattr(self, name)!r}")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> MpcSettings:

@@ -110,8 +110,10 @@ class WalkingMpc:
         self.settings = settings or MpcSettings.from_dict(self.cfg.section("mpc"))
         if iterations is None:
             iterations = self.settings.iterations
-        if int(iterations) < 1:
-            raise ValueError(f"iterations per tick must be >= 1, got {iterations}")
+        if (isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer))
+                or iterations < 1):  # 1.7 was taken as 1
+            raise ValueError(f"iterations per tick must be a whole number >= 1, got "
+                             f"{iterations!r}")
         self.iterations = int(iterations)
         t = time.perf_counter()
         self.wp = build_walking_problem(model, self.cfg, self.settings)
@@ -277,6 +279,11 @@ class WalkingMpc:
             raise RuntimeError("prepare() needs a started controller (start() or update())")
         if not math.isfinite(t_next):
             raise ValueError(f"prepare(): the tick time must be finite, got {t_next}")
+        if t_next < self.t_last:
+            # the next tick's: one before the last moved the controller's time back, and
+            # the next update took the whole gap as elapsed (solo12 ran 0.55 m/s for 0.2)
+            raise ValueError(f"prepare(): the tick time {t_next:.6g} s is before the last "
+                             f"tick's ({self.t_last:.6g} s): prepare the next tick")
         cmd = self._checked_command(cmd)
         dt_tick = max(t_next - self.t_last, 0.0)
         self._ramp_command(cmd, dt_tick)
@@ -595,9 +602,12 @@ class WalkingMpc:
             ValueError: an unknown gait or a value out of its range (nothing changed).
         """
         g = self.settings.gait
-        step_duration = g.step_duration if step_duration is None else float(step_duration)
-        step_height = g.step_height if step_height is None else float(step_height)
+        step_duration = g.step_duration if step_duration is None else step_duration
+        step_height = g.step_height if step_height is None else step_height
+        # make_gait checks every value (a stand's ignored duty factor too: 5.0 was stored
+        # and the settings were then invalid)
         gait = make_gait(name, step_duration, step_height, duty_factor, len(self.wp.feet))
+        step_duration, step_height = float(step_duration), float(step_height)
         old = self.scheduler.pending or self.scheduler.gait
         changed = (gait.name, gait.period, gait.duty_factor) != (old.name, old.period,
                                                                  old.duty_factor)
