@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from ocps import pendulum_swing_up
 
 from horizon_mpc import make_solver
 from horizon_mpc.examples.cartpole import build_cartpole
@@ -98,21 +99,8 @@ def test_a_feedback_step_that_is_not_finite_leaves_the_guesses_alone():
 
 
 def _swing_up(u_max: float):
-    """Pendulum swing-up with an active input bound (as test_ilqr_box's), solved."""
-    import casadi as cs
-
-    from horizon_mpc.examples.pendulum import pendulum_dynamics
-    from horizon_mpc.problem import Problem
-
-    prb = Problem(60)
-    x = prb.create_state_variable("x", 2)
-    u = prb.create_input_variable("u", 1)
-    prb.set_dynamics(cs.vertcat(x[1], pendulum_dynamics(x[0], x[1], u)))
-    prb.set_dt(0.05)
-    x.set_bounds([0, 0], [0, 0], nodes=0)
-    u.set_bounds(-u_max, u_max)
-    prb.create_cost("effort", u, weight=0.1)
-    prb.create_final_constraint("upright", x - [np.pi, 0])
+    """The pendulum swing-up with an active input bound, solved and shifted."""
+    prb = pendulum_swing_up(u_max)
     solver = make_solver("ilqr", prb)
     assert solver.solve()
     solver.shift()

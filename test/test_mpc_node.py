@@ -1917,6 +1917,19 @@ class _Logger:
         pass
 
 
+def _feed_layout(node, q: np.ndarray, k: int, extra_joint: str,
+                 children: tuple[str, ...]) -> None:
+    """State k (20 ms apart) of a standing robot: a JointState with one joint the model lacks,
+    and an Odometry per child frame name."""
+    stamp = time_from_ns(10 * NS_PER_S + k * 20_000_000)
+    node._on_joint_state(joint_state_to_msg(stamp, [*node.joint_names, extra_joint],
+                                            np.append(q[7:], 0.0), np.zeros(len(q) - 6)))
+    for child in children:
+        odom = odometry_to_msg(stamp, q[:3], q[3:7], np.zeros(3), np.zeros(3))
+        odom.child_frame_id = child
+        node._on_odom(odom)
+
+
 def test_a_publishers_fixed_layout_is_said_once_repairs_stay_throttled(context, walking_mpc,
                                                                       monkeypatch):
     """A robot with a gripper sends two joints the model lacks in every JointState: the
@@ -1928,16 +1941,8 @@ def test_a_publishers_fixed_layout_is_said_once_repairs_stay_throttled(context, 
     monkeypatch.setattr(node, "get_logger", lambda: log)
     try:
         _, q = standing_configuration(walking_mpc.cfg)
-        zeros = np.zeros(3)
         for k in range(3):
-            stamp = time_from_ns(10 * NS_PER_S + k * 20_000_000)
-            msg = joint_state_to_msg(stamp, [*node.joint_names, "gripper_finger"],
-                                     np.append(q[7:], 0.0), np.zeros(len(q) - 6))
-            node._on_joint_state(msg)
-            for child in ("imu_link", "base", ""):
-                odom = odometry_to_msg(stamp, q[:3], q[3:7], zeros, zeros)
-                odom.child_frame_id = child
-                node._on_odom(odom)
+            _feed_layout(node, q, k, "gripper_finger", ("imu_link", "base", ""))
             node._last_warn.clear()  # as if the throttle period had passed
         extra = [w for w in log.warnings if "gripper_finger" in w]
         frames = [w for w in log.warnings if "child_frame_id" in w]
@@ -1961,15 +1966,8 @@ def test_a_layout_that_changes_per_message_is_throttled_and_its_names_clipped(
     monkeypatch.setattr(node, "get_logger", lambda: log)
     try:
         _, q = standing_configuration(walking_mpc.cfg)
-        zeros = np.zeros(3)
         for k in range(50):
-            stamp = time_from_ns(10 * NS_PER_S + k * 20_000_000)
-            node._on_joint_state(joint_state_to_msg(stamp, [*node.joint_names, f"grip_{k}"],
-                                                    np.append(q[7:], 0.0),
-                                                    np.zeros(len(q) - 6)))
-            odom = odometry_to_msg(stamp, q[:3], q[3:7], zeros, zeros)
-            odom.child_frame_id = f"imu_{k}"
-            node._on_odom(odom)
+            _feed_layout(node, q, k, f"grip_{k}", (f"imu_{k}",))
         extra = [w for w in log.warnings if "grip_" in w]
         frames = [w for w in log.warnings if "child_frame_id" in w]
         # ONCE_KEYS said once, then one throttled line (no wall time passed)
