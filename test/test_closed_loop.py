@@ -550,7 +550,11 @@ def test_realtime_mode_hears_the_ticks_of_the_child_through_ros(realtime_run):
     assert rec.t[-1] >= 2.5 - 0.05
     assert 0.5 < summary["real_time_factor"] < 1.1  # the sim keeps to the wall clock
     assert 10 < summary["ticks_per_sim_second"] <= 51  # a timer at 50 Hz on the sim clock
-    assert summary["ticks"] == len(rec.tick_time) == len(rec.tick_iterations)
+    # plans counted as the sim got them, tick times from the diagnostics published just
+    # after each plan: the run may end between the two (110 plans, 109 ticks on a loaded
+    # machine, session 28)
+    assert len(rec.tick_time) == len(rec.tick_iterations)
+    assert 0 <= summary["ticks"] - len(rec.tick_time) <= 1
     assert all(i >= 1 for i in rec.tick_iterations)
     assert 0 < summary["tick_time_ms"]["median"] < summary["tick_time_ms"]["max"] < 1000
     assert np.isfinite(summary["bootstrap_ms"])
