@@ -607,7 +607,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--iterations", type=int, default=None,
                     help="ILQR iterations per tick (default: the robot config's mpc.iterations)")
     ap.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
-                    help="render a GIF (every 50 ms of sim time)")
+                    help="render a GIF (a frame every 50 ms of sim time; at most 400 "
+                    "frames, further apart for runs over 20 s)")
     ap.add_argument("--domain-id", type=int, default=None,
                     help="ROS_DOMAIN_ID of the run (default: lockstep a private one from "
                     "the process id; realtime the environment's, else that private one)")

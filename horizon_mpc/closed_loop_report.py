@@ -33,11 +33,12 @@ MAX_GIF_FRAMES = 400
 
 
 def gif_frame_period(duration: float) -> float:
-    """Sim s between two GIF frames of a run of ``duration`` s: :data:`FRAME_PERIOD`, longer
-    for runs of more than :data:`MAX_GIF_FRAMES` frames (the GIF still plays in real time,
-    at fewer frames per second)."""
-    return max(FRAME_PERIOD, duration / MAX_GIF_FRAMES) if math.isfinite(duration) \
-        else FRAME_PERIOD
+    """Sim s between two GIF frames of a run of ``duration`` s (frames at both ends):
+    :data:`FRAME_PERIOD`, longer for runs of more than :data:`MAX_GIF_FRAMES` frames (the
+    GIF still plays in real time, at fewer frames per second)."""
+    if not math.isfinite(duration):
+        return FRAME_PERIOD
+    return max(FRAME_PERIOD, duration / (MAX_GIF_FRAMES - 1))
 AXES = ("vx", "vy", "wz")
 
 

@@ -581,11 +581,13 @@ def test_a_long_runs_gif_frames_are_spread_out_to_bound_their_memory():
     from horizon_mpc.closed_loop import _Loop
     from horizon_mpc.closed_loop_report import MAX_GIF_FRAMES, gif_frame_period
 
-    assert gif_frame_period(10.0) == 0.05 and gif_frame_period(20.0) == 0.05
-    assert gif_frame_period(40.0) == pytest.approx(0.1)
-    assert gif_frame_period(600.0) * MAX_GIF_FRAMES == pytest.approx(600.0)
+    assert gif_frame_period(10.0) == 0.05 and gif_frame_period(19.95) == 0.05
+    for duration in (20.0, 40.0, 100.0, 600.0):  # frames at both ends: at most MAX in all
+        period = gif_frame_period(duration)
+        assert len(np.arange(0.0, duration + 1e-9, period)) == MAX_GIF_FRAMES, duration
     assert gif_frame_period(math.inf) == 0.05
-    assert _Loop([Segment(40.0)], 40.0, True, 1.0, []).rec.frame_period == pytest.approx(0.1)
+    assert _Loop([Segment(40.0)], 40.0, True, 1.0, []).rec.frame_period == pytest.approx(
+        40.0 / (MAX_GIF_FRAMES - 1))
 
 
 def test_an_unknown_robot_fails_before_any_process_starts(started_processes):

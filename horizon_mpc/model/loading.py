@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import re
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from xml.etree import ElementTree
 
 import pinocchio as pin
 
@@ -79,15 +79,16 @@ def _stderr_captured() -> Iterator[list[str]]:
         lines.extend(out.text.splitlines())
 
 
-_MIMIC = re.compile(r"<joint\b[^>]*?\bname\s*=\s*[\"']([^\"']*)[\"'](?:(?!</joint>).)*?"
-                    r"<mimic\b[^>]*?\bjoint\s*=\s*[\"']([^\"']*)[\"']", re.S)
-
-
 def _warn_mimic_joints(text: str, source: str) -> None:
     """Warn about URDF mimic joints: Pinocchio's URDF parser (as used here) makes each one
     an independent, actuated degree of freedom, and nothing in the model couples it to the
     joint it mimics."""
-    pairs = _MIMIC.findall(text)
+    try:
+        root = ElementTree.fromstring(text.lstrip("\ufeff").encode())
+    except ElementTree.ParseError:  # Pinocchio read it; nothing to say about mimics here
+        return
+    pairs = [(joint.get("name", "?"), mimic.get("joint", "?"))
+             for joint in root.iter("joint") for mimic in joint.findall("mimic")]
     if pairs:
         log.warning("%s: mimic joints become independent joints of the model (%s); couple "
                     "them in your problem if they must move together", source,

@@ -60,6 +60,9 @@ __all__ = ["SimNode", "main"]
 _WARN_PERIOD = 2.0  # s (wall) between two warnings of the same kind
 _MAX_LAG = 0.25  # s (wall): further behind the wall clock than this, the pacing re-anchors
 _FREE_RUN_SLICE = 0.002  # s (wall) of stepping per callback when running as fast as possible
+#: s (wall): a lockstep controller of joint_states and joint_trajectory gets the first state
+#: this long after it was seen without an odom subscriber (one of the joints only)
+ODOM_GRACE = 0.5
 
 
 #: the lockstep emulation of a real-time loop's delays (doc/simulator.md), sim s
@@ -234,6 +237,7 @@ class SimNode(Node):
         self.awaiting_stamp_ns: int | None = None
         self._started = not self.lockstep
         self._deadline = self._wall_deadline()
+        self._controller_seen: float | None = None  # wall time, see peers_ready
         # free-running pacing anchors (wall ns, sim ns)
         self._anchor: tuple[int, int] | None = None
         if self.lockstep:
@@ -372,12 +376,21 @@ class SimNode(Node):
 
     @property
     def peers_ready(self) -> bool:
-        """Whether ``joint_states`` and ``odom`` subscribers and a ``joint_trajectory``
-        publisher exist (a controller whose odom subscription discovery had not matched yet
-        missed the first lockstep state, and the simulator waited lockstep_timeout)."""
-        return (self._pub_joints.get_subscription_count() > 0
-                and self._pub_odom.get_subscription_count() > 0
-                and self._sub_trajectory.get_publisher_count() > 0)
+        """Whether a controller is connected: a ``joint_states`` subscriber and a
+        ``joint_trajectory`` publisher, and an ``odom`` subscriber or, for a controller of
+        the joints only, :data:`ODOM_GRACE` s (wall) since the other two were seen (one
+        whose odom subscription discovery had not matched yet missed the first lockstep
+        state, and the simulator waited lockstep_timeout)."""
+        if not (self._pub_joints.get_subscription_count() > 0
+                and self._sub_trajectory.get_publisher_count() > 0):
+            self._controller_seen = None
+            return False
+        if self._pub_odom.get_subscription_count() > 0:
+            return True
+        now = time.monotonic()
+        if self._controller_seen is None:
+            self._controller_seen = now
+        return now - self._controller_seen >= ODOM_GRACE
 
     def _on_lockstep_timer(self) -> None:
         if not self._started:  # the first state goes out once the controller is connected

@@ -26,8 +26,8 @@ Values = float | Sequence[float] | np.ndarray
 #: number or array, or a list of those (stacked)
 Expression = cs.SX | float | np.ndarray | Sequence
 
-__all__ = ["Expression", "NodeSelection", "Values", "broadcast_values", "check_bounds",
-           "select_nodes"]
+__all__ = ["Expression", "NodeSelection", "Values", "bound_values", "broadcast_values",
+           "check_bounds", "holds_none", "select_nodes"]
 
 
 def select_nodes(nodes: NodeSelection, n_valid: int, what: str = "",
@@ -121,16 +121,19 @@ def bound_values(value, side: float, dim: int, n_sel: int, what: str = "") -> np
     """:func:`broadcast_values` of a bound, None being no bound (``side``: -inf for a lower
     bound, inf for an upper one; it was taken as a NaN bound and refused), as a whole or as
     an element of a list (``[None, 0]``: no bound on the first component)."""
+    if isinstance(value, np.ndarray) and value.dtype == object:  # np.array([None, 0])
+        value = value.tolist()
     if value is None:
         value = side
-    elif isinstance(value, (list, tuple)) and any(_holds_none(v) for v in value):
+    elif isinstance(value, (list, tuple)) and holds_none(value):
         value = _none_to(value, side)
     return broadcast_values(value, dim, n_sel, what)
 
 
-def _holds_none(value) -> bool:
+def holds_none(value) -> bool:
+    """Whether ``value`` is None or a (nested) list or tuple with a None in it."""
     return value is None or (isinstance(value, (list, tuple))
-                             and any(_holds_none(v) for v in value))
+                             and any(holds_none(v) for v in value))
 
 
 def _none_to(value, side: float):

@@ -341,27 +341,30 @@ class Problem:
     def check_dt_values(self) -> None:
         """ValueError when dt, an expression of parameters, is not a finite number > 0 on
         some node with the parameters' current values (``set_dt`` checks a constant). With
-        single variables in it, at their initial guess (within their bounds): where the
-        solver starts (``T * frac`` with a negative ``frac`` on a node solved a
-        time-reversed interval and called it a success; keeping dt positive as they move is
-        for their bounds). Solvers call it at every solve: a parameter assigned -0.1 solved
-        a time-reversed problem and called it a success."""
+        single variables in it, not a finite number >= 0 at their initial guess (within
+        their bounds), where the solver starts (``T * frac`` with a negative ``frac`` on a
+        node solved a time-reversed interval and called it a success; 0 is a time ``T >= 0``
+        guessed 0, which solves; keeping dt positive as they move is for their bounds).
+        Solvers call it at every solve: a parameter assigned -0.1 solved a time-reversed
+        problem and called it a success."""
         dt = self._dt
         if dt is None or isinstance(dt, float):
             return
         singles = np.zeros(self.ns)
-        where = "with the parameters' values"
+        where, least = "with the parameters' values", "> 0"
         if cs.depends_on(dt, self.s):
             singles = np.clip(self.stacked("single").ravel(),
                               self.stacked("single", "lower_bounds").ravel(),
                               self.stacked("single", "upper_bounds").ravel())
-            where += " and the single variables' initial guess"
+            # 0 there is a start on a bound (a time T >= 0 guessed 0), not a reversed interval
+            where, least = where + " and the single variables' initial guess", ">= 0"
         # interval k takes dt of node k: node N's value is never used
         values = np.asarray(self.dt_function()(singles, self.parameter_values()[:, :-1]))
-        bad = np.flatnonzero(~(np.isfinite(values) & (values > 0)).ravel())
+        good = np.isfinite(values) & ((values > 0) if least == "> 0" else (values >= 0))
+        bad = np.flatnonzero(~good.ravel())
         if bad.size:
             k = int(bad[0])
-            raise ValueError(f"dt must be a finite number > 0; {where} it is "
+            raise ValueError(f"dt must be a finite number {least}; {where} it is "
                              f"{float(values.ravel()[k])!r} at node {k}"
                              + (f" (and {bad.size - 1} other node(s))" if bad.size > 1 else ""))
 

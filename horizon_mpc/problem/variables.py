@@ -21,6 +21,7 @@ from horizon_mpc.problem.nodes import (
     bound_values,
     broadcast_values,
     check_bounds,
+    holds_none,
     select_nodes,
 )
 
@@ -91,8 +92,9 @@ class Variable(cs.SX):
                what: str) -> None:
         """``target[:, cols] = value`` for the shapes :func:`broadcast_values` takes, by
         numpy's broadcasting (no intermediate array: these run every MPC tick)."""
-        if value is None:  # numpy takes it as NaN: caught only at the solve
-            raise TypeError(f"{what} of {self.name!r} is None; give a number or an array")
+        # numpy takes None as NaN: caught only at the solve (a bound's None is no bound)
+        if value is None or (isinstance(value, (list, tuple)) and holds_none(value)):
+            raise TypeError(f"{what} of {self.name!r} is or holds None; give numbers")
         arr = np.asarray(value, dtype=float)
         if arr.ndim == 1 and arr.shape[0] == self.dim:
             arr = arr[:, None]

@@ -174,11 +174,6 @@ class IlqrSolver(Solver):
         for lo, hi in (("mu_min", "mu_max"), ("rho_init", "rho_max")):
             if opts[lo] > opts[hi]:
                 raise ValueError(f"ilqr options: {lo} {opts[lo]!r} is above {hi} {opts[hi]!r}")
-        # a regularisation started outside its range ran there (1e3 above mu_max 1: 101
-        # iterations for 86; 1e-12 below mu_min 1e-6 was taken as is)
-        if not opts["mu_min"] <= opts["mu_init"] <= opts["mu_max"]:
-            raise ValueError(f"ilqr options: mu_init {opts['mu_init']:g} is outside [mu_min, "
-                             f"mu_max] = [{opts['mu_min']:g}, {opts['mu_max']:g}]")
         if opts["callback"] is not None and not callable(opts["callback"]):
             raise TypeError(f"ilqr option 'callback' must be callable (called with a dict per "
                             f"iteration) or None, got {opts['callback']!r}")
@@ -212,7 +207,7 @@ class IlqrSolver(Solver):
         self._eq_rows = self._layout.stage_rows()
         self._uses_input = np.concatenate(
             [np.full(c.dim, bool(c.uses_input)) for c in m.stage_cons] or [np.zeros(0, bool)])
-        self.mu = self.opts["mu_init"]
+        self.mu = self._mu_init()
         difference = prb.state_difference()
         if self.opts["codegen"] and codegen_enabled():
             difference = compile_function(difference)
@@ -417,7 +412,7 @@ class IlqrSolver(Solver):
         # node gets its box
         self._auto_box = True
         self._regather()
-        self.mu = self.opts["mu_init"]
+        self.mu = self._mu_init()
         return self._evaluate(self.X, self.U)
 
     def _regather(self) -> None:
@@ -1056,10 +1051,18 @@ class IlqrSolver(Solver):
         at it: it was taken at the build and at resets only)."""
         super().set_option(key, value)
         if key == "mu_init":
-            self.mu = value
+            self.mu = self._mu_init()
+
+    def _mu_init(self) -> float:
+        """``mu_init`` within [``mu_min``, ``mu_max``]: a regularisation started outside its
+        range ran there (1e3 above mu_max 1: 101 iterations for 86; 1e-12 below mu_min 1e-6
+        was taken as is). Clipped, not refused: raising only ``mu_min`` is a choice of the
+        range, the default start follows it."""
+        o = self.opts
+        return min(max(o["mu_init"], o["mu_min"]), o["mu_max"])
 
     def reset_multipliers(self) -> None:
         """Forget the augmented-Lagrangian state (e.g. after a solver failure)."""
         self._al.reset()
         self._alN.reset()
-        self.mu = self.opts["mu_init"]
+        self.mu = self._mu_init()
