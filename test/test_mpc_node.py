@@ -1018,7 +1018,7 @@ def test_iterations_per_tick_default_to_the_config_and_are_validated():
     mpc = WalkingMpc("go2")
     assert mpc.iterations == 1 and mpc.solver.opts["iterations_per_call"] == 1
     assert WalkingMpc("go2", iterations=2).solver.opts["iterations_per_call"] == 2
-    with pytest.raises(ValueError, match="iterations per tick must be >= 1"):
+    with pytest.raises(ValueError, match="iterations per tick must be a whole number >= 1"):
         WalkingMpc("go2", iterations=0)
 
 
