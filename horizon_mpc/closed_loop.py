@@ -58,6 +58,7 @@ from horizon_mpc.locomotion import GaitSettings, MpcSettings, config_gait, speed
 from horizon_mpc.nodes.mpc_node import MpcNode
 from horizon_mpc.nodes.mpc_parameters import MODEL_PARAMETERS, gait_duty_factor, parameter_names
 from horizon_mpc.nodes.mpc_process import (
+    MAX_DOMAIN_ID,
     MpcMonitor,
     MpcProcess,
     MpcProcessError,
@@ -82,7 +83,6 @@ HOLD_PERIOD = 0.25
 #: Hz (sim) of the simulator's states in real time (sim_node's default is 500): measured on
 #: go2, the same plan age and ticks per second, ~0.1 core less in each process
 REALTIME_STATE_RATE = 250.0
-MAX_DOMAIN_ID = 232  # the largest ROS_DOMAIN_ID whose ports fit on Linux
 #: s (wall) after the loop's nodes start before the last check for other publishers on the
 #: run's domain (discovery is not instantaneous; a short lockstep run is over in 0.3 s)
 DISCOVERY_SETTLE = 2.0
@@ -299,7 +299,8 @@ SIM_LOCKSTEP_PARAMETERS = {"lockstep_latency": float, "lockstep_latency_jitter":
                            "lockstep_seed": int, "lockstep_state_offset": float}
 
 # the loop's topics and how many publishers each has in the loop itself
-_LOOP_PUBLISHERS = {"joint_trajectory": 1, "joint_states": 1, "odom": 1, "cmd_vel": 1}
+_LOOP_PUBLISHERS = {"joint_trajectory": 1, "joint_states": 1, "odom": 1, "cmd_vel": 1,
+                    "/clock": 1}
 
 
 class SettingError(ValueError):
@@ -488,23 +489,27 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
             try:
                 rec.wall_time = _realtime_loop(executor, sim, monitor, child, pub_cmd, dt,
                                                loop, lambda: _foreign_publishers(player, rec))
-            except KeyboardInterrupt:  # the figures of the run so far
-                rec.wall_time = time.perf_counter() - wall0
+                _final_isolation_check(player, rec, t_player)
+                rec.mpc_process = _process_figures(child, cpu0)
+                _copy_ticks(monitor.record, rec)
+            except KeyboardInterrupt:  # the figures of the run so far (also when the
+                # signal came after the loop: in the final check's 2 s, the summary said
+                # the MPC had never ticked)
+                rec.wall_time = rec.wall_time or time.perf_counter() - wall0
                 rec.mpc_process = _process_figures(child, cpu0)  # it was left {} here
                 _copy_ticks(monitor.record, rec)
                 rec.mpc_process["exit_code"] = child.stop()  # as a whole run's summary has
                 rec.mpc_log = child.log_tail(lines=200)
                 raise
-            _final_isolation_check(player, rec, t_player)
-            rec.mpc_process = _process_figures(child, cpu0)
-            _copy_ticks(monitor.record, rec)
             executor.shutdown()
             for node in (player, monitor, sim):
                 node.destroy_node()
         finally:
             rclpy.try_shutdown(context=ctx)
-        rec.mpc_process["exit_code"] = child.stop()
-        rec.mpc_log = child.log_tail(lines=200)
+        try:
+            rec.mpc_process["exit_code"] = child.stop()
+        finally:  # a signal while it stops: the log all the same
+            rec.mpc_log = child.log_tail(lines=200)
     if loop.gif:  # rendered from the recorded states, not in the loop (it would steal time)
         rec.frames = render_replay(robot, rec.t, rec.q, rec.frame_period)
     return rec
@@ -641,7 +646,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         log.error("cannot run: %s", message)
         return 2
-    domain_id = run_domain_id(args.mode, args.domain_id)  # resolved here to be told
+    try:
+        domain_id = run_domain_id(args.mode, args.domain_id)  # resolved here to be told
+    except ValueError as exc:  # the environment's ROS_DOMAIN_ID
+        log.error("cannot run: %s", exc)
+        return 2
     log.info("closed loop: %s, %s, profile %s, ROS_DOMAIN_ID %d%s", args.robot, args.mode,
              profile, domain_id, " (this run's own; --domain-id to choose)"
              if args.domain_id is None and args.mode == "lockstep" else "")

@@ -20,7 +20,8 @@ from horizon_mpc.locomotion.command import limit_command
 if TYPE_CHECKING:
     from horizon_mpc.closed_loop import Recording, Segment
 
-__all__ = ["fallen", "render_replay", "roll_pitch_yaw", "summarise", "write_report"]
+__all__ = ["REPORT_FILES", "fallen", "render_replay", "roll_pitch_yaw", "summarise",
+           "write_report"]
 
 SETTLING = 1.0  # s after a segment starts before its tracking error counts
 FALL_HEIGHT = 0.6  # fraction of the nominal base height below which the robot has fallen
@@ -188,15 +189,23 @@ def render_replay(robot: str, t: Sequence[float], q: Sequence[np.ndarray],
     return frames
 
 
+#: what :func:`write_report` writes into a run's folder
+REPORT_FILES = ("summary.json", "mpc_node.log", "velocity_tracking.png", "base_pose.png",
+                "contacts.png", "solve_time.png", "run.gif")
+
+
 def write_report(rec: Recording, summary: dict, out: str | Path,
                  written: list[Path] | None = None) -> list[Path]:
     """Write summary.json, the PNG plots, (if frames were rendered) run.gif and (real time)
-    mpc_node.log into ``out``; an earlier run's run.gif or mpc_node.log there is removed
-    when this run has none. Returns the paths written, appended to ``written`` as they are
-    (an interrupted call leaves the ones it finished there). The summary goes first:
+    mpc_node.log into ``out``; an earlier run's files of those names there are removed
+    first (:data:`REPORT_FILES`: a Ctrl-C while writing left the earlier run's plots and GIF
+    beside this run's summary). Returns the paths written, appended to ``written`` as they
+    are (an interrupted call leaves the ones it finished there). The summary goes first:
     matplotlib's import and the plots take seconds, in which a Ctrl-C left no output."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    for name in REPORT_FILES:
+        (out / name).unlink(missing_ok=True)
     written = [] if written is None else written
     # strict JSON: a figure with no samples (NaN) is null, not the NaN parsers refuse
     (out / "summary.json").write_text(json.dumps(_finite_or_null(summary), indent=2,
@@ -282,10 +291,6 @@ def write_report(rec: Recording, summary: dict, out: str | Path,
         from horizon_mpc.sim.render import write_gif
 
         written.append(write_gif(out / "run.gif", rec.frames, fps=1.0 / rec.frame_period))
-    # an earlier run's GIF or node log in the same folder would pass for this run's
-    for stale in (out / "run.gif", out / "mpc_node.log"):
-        if stale not in written:
-            stale.unlink(missing_ok=True)
     return written
 
 

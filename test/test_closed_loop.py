@@ -525,6 +525,22 @@ def test_realtime_mode_runs_the_mpc_in_a_second_process(realtime_run):
     assert summary["domain_id"] == child["domain_id"] and summary["foreign_publishers"] == []
 
 
+def test_a_report_removes_the_earlier_runs_files_before_writing_its_own(tmp_path):
+    """A Ctrl-C while a real-time run's report was written left the earlier (lockstep)
+    run's plots and GIF beside the new summary (session 28 audit): they go first."""
+    from horizon_mpc.closed_loop_report import REPORT_FILES
+
+    for name in REPORT_FILES:
+        (tmp_path / name).write_text("an earlier run's\n")
+    (tmp_path / "mine.txt").write_text("the user's\n")
+    rec = Recording()  # no period recorded: the summary (and log) only, as when interrupted
+    rec.mpc_log = "log"
+    written = write_report(rec, {"robot": "go2"}, tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.txt", "mpc_node.log",
+                                                           "summary.json"]
+    assert [p.name for p in written] == ["summary.json", "mpc_node.log"]
+
+
 @pytest.mark.slow
 def test_a_report_without_a_gif_or_a_log_removes_an_earlier_runs(realtime_run, tmp_path):
     """A --no-gif (or lockstep) run into the folder of an earlier real-time run with a GIF
@@ -791,6 +807,50 @@ def test_an_interrupted_realtime_run_keeps_the_mpc_process_figures(tmp_path, mon
     assert child["pid"] != os.getpid() and child["memory_mb"]["peak"] > 50
     assert child["cpu_s"] > 0.0 and not process_exists(child["pid"])
     assert child["exit_code"] == 0
+
+
+def test_a_signal_after_the_realtime_loop_keeps_its_ticks_and_the_mpc_figures(
+        tmp_path, monkeypatch):
+    """A Ctrl-C in the last isolation check (up to 2 s after the loop) wrote a summary of no
+    tick, no MPC process figures and no mpc_node.log (session 28 audit)."""
+    from horizon_mpc import closed_loop
+
+    check = closed_loop._final_isolation_check
+
+    def then_interrupted(*args, **kwargs):
+        check(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(closed_loop, "_final_isolation_check", then_interrupted)
+    out = tmp_path / "out"
+    assert closed_loop.main(["--out", str(out), "--no-gif", "--duration", "1", "--mode",
+                             "realtime"]) == 130
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and summary["ticks"] > 10
+    assert summary["mpc_process"]["exit_code"] == 0 and (out / "mpc_node.log").is_file()
+
+
+def test_the_environments_domain_id_is_checked_like_the_option(monkeypatch, caplog,
+                                                               tmp_path):
+    """ROS_DOMAIN_ID=300 ended a real-time run inside DDS without a word, -1 in a traceback,
+    'abc' went to a private domain silently (session 28 audit)."""
+    from horizon_mpc.closed_loop import main
+    from horizon_mpc.nodes.mpc_process import default_domain_id
+
+    for value in ("300", "-1", "abc"):
+        monkeypatch.setenv("ROS_DOMAIN_ID", value)
+        with pytest.raises(ValueError, match=f"ROS_DOMAIN_ID='{value}' in the environment"):
+            default_domain_id()
+        caplog.clear()
+        with caplog.at_level("ERROR"):
+            assert main(["--mode", "realtime", "--duration", "0.1", "--no-gif", "--out",
+                         str(tmp_path / "out")]) == 2
+        assert "is no ROS domain (0..232" in caplog.text
+        assert not (tmp_path / "out").exists()
+    monkeypatch.setenv("ROS_DOMAIN_ID", " 7 ")
+    assert default_domain_id() == 7
+    monkeypatch.setenv("ROS_DOMAIN_ID", "")
+    assert 1 <= default_domain_id() <= 232
 
 
 def test_a_robot_config_the_nodes_cannot_start_with_is_one_line_exit_2(tmp_path, caplog):

@@ -40,6 +40,7 @@ log = logging.getLogger(__name__)
 MPC_NODE_COMMAND = (sys.executable, "-m", "horizon_mpc.nodes.mpc_node")
 #: Domain ids whose DDS ports are valid on Linux (0, everybody's default, left out).
 PRIVATE_DOMAIN_IDS = (*range(1, 102), *range(215, 233))
+MAX_DOMAIN_ID = 232  # the largest ROS_DOMAIN_ID whose ports fit on Linux
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
@@ -61,11 +62,25 @@ def private_domain_id(pid: int | None = None) -> int:
 
 def default_domain_id() -> int:
     """``ROS_DOMAIN_ID`` from the environment when set (to watch the run from another
-    terminal), else :func:`private_domain_id`."""
-    try:
-        return int(os.environ["ROS_DOMAIN_ID"])
-    except (KeyError, ValueError):
+    terminal), else :func:`private_domain_id`.
+
+    Raises:
+        ValueError: the variable is set to no domain id (0..:data:`MAX_DOMAIN_ID`): 300
+            ended the run inside DDS without a word, -1 in a traceback, and 'abc' was
+            ignored for a private domain silently.
+    """
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not text:
         return private_domain_id()
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= MAX_DOMAIN_ID:
+        raise ValueError(f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']!r} in the environment is "
+                         f"no ROS domain (0..{MAX_DOMAIN_ID} on Linux): set it right, unset it "
+                         "(a private domain), or give --domain-id")
+    return value
 
 
 def _parent_death_signal() -> Callable[[], None] | None:
