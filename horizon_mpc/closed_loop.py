@@ -646,11 +646,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         log.error("cannot run: %s", message)
         return 2
-    try:
-        domain_id = run_domain_id(args.mode, args.domain_id)  # resolved here to be told
-    except ValueError as exc:  # the environment's ROS_DOMAIN_ID
-        log.error("cannot run: %s", exc)
-        return 2
+    domain_id = run_domain_id(args.mode, args.domain_id)  # resolved here to be told
     log.info("closed loop: %s, %s, profile %s, ROS_DOMAIN_ID %d%s", args.robot, args.mode,
              profile, domain_id, " (this run's own; --domain-id to choose)"
              if args.domain_id is None and args.mode == "lockstep" else "")
@@ -770,6 +766,7 @@ def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, li
     if args.domain_id is not None and not 0 <= args.domain_id <= MAX_DOMAIN_ID:
         raise ValueError(f"--domain-id must be in 0..{MAX_DOMAIN_ID} (ROS 2 on Linux), got "
                          f"{args.domain_id}")
+    run_domain_id(args.mode, args.domain_id)  # the environment's, checked the same way
     segments = load_profile(profile)
     pushes = load_pushes(profile)
     end = args.duration if args.duration is not None else sum(s.duration for s in segments)
