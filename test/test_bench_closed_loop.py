@@ -134,7 +134,9 @@ def test_a_tiny_realtime_run_brings_the_mpc_process_figures_back(tmp_path):
     # a prepared tick most arrive within the state's own sim clock step (4 ms at the 250 Hz
     # states: age 0 on the sim clock), in a short run possibly all of them
     age = ticks["plan_age_ms"]
-    assert age["min"] >= 0 and _finite(age["mean"]) and age["max"] < 100
+    # (a wall-clock bound: 320 ms once with CI and two other jobs on the 2 cores, session 28;
+    # a second would be a plan of the bootstrap's time, not one of this loop)
+    assert age["min"] >= 0 and _finite(age["mean"]) and age["max"] < 1000
     assert ticks["messages"]["joint_states"] > 0
     memory = on_disk["bench"]["memory_mb"]
     assert memory["process"].startswith("mpc_node") and memory["peak"] > 50
