@@ -13,7 +13,8 @@ from launch_ros.actions import Node
 
 ARGUMENTS = {
     "robot": ("go2", "robot config name (config/<robot>.yaml)"),
-    "mode": ("realtime", "'realtime' (the demo) or 'lockstep' (deterministic)"),
+    "mode": ("realtime", "'realtime' (two processes, real time) or 'lockstep' "
+             "(deterministic; the run of `make demo`)"),
     "profile": ("", "command profile YAML (empty: config/commands/default.yaml)"),
     "out": ("out/closed_loop", "output folder for summary.json, plots and the GIF"),
 }
