@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 __all__ = ["RobotConfig", "SimGains", "check_settings", "config_dirs", "field_default",
@@ -163,8 +164,9 @@ def field_default(f: dataclasses.Field) -> Any:
 def check_settings(settings: object, positive: tuple[str, ...] = (),
                    non_negative: tuple[str, ...] = (), prefix: str = "") -> None:
     """Check a settings dataclass: every number finite, those in ``positive`` > 0, those in
-    ``non_negative`` >= 0 (an optional number, None by default, is checked when given).
-    Lists, mappings, nested settings, text and flags are left to their owners.
+    ``non_negative`` >= 0 (an optional number, None by default, is checked when given),
+    every flag (a setting whose default is a bool) true or false (a quoted "false" was a
+    true flag). Lists, mappings, nested settings and text are left to their owners.
 
     Raises:
         ValueError: naming the setting as ``prefix + name`` (the CLIs turn it into one
@@ -173,10 +175,14 @@ def check_settings(settings: object, positive: tuple[str, ...] = (),
     for f in dataclasses.fields(settings):
         value = getattr(settings, f.name)
         default = field_default(f)
-        if (value is None or isinstance(value, (list, tuple, dict))
-                or dataclasses.is_dataclass(value) or isinstance(default, (str, bool))):
-            continue
         name = prefix + f.name
+        if isinstance(default, bool):
+            if not isinstance(value, (bool, np.bool_)):
+                raise ValueError(f"setting {name!r} must be true or false, got {value!r}")
+            continue
+        if (value is None or isinstance(value, (list, tuple, dict))
+                or dataclasses.is_dataclass(value) or isinstance(default, str)):
+            continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"setting {name!r} must be a number, got {value!r}")
         if not math.isfinite(value):

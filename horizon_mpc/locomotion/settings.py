@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from horizon_mpc.config import RobotConfig, check_settings
+from horizon_mpc.config import RobotConfig, check_settings, field_default
 from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM
 from horizon_mpc.locomotion.gaits import GAITS, Gait, make_gait
 
@@ -90,8 +90,7 @@ class Weights:
         (they were checked when the problem was built, naming a cost and not the key:
         ``force: "x"`` was 'could not convert string to float')."""
         for f in fields(self):
-            value, default = getattr(self, f.name), f.default_factory() if callable(
-                f.default_factory) else f.default
+            value, default = getattr(self, f.name), field_default(f)
             name = f"mpc.weights.{f.name}"
             if isinstance(default, list):
                 if not (isinstance(value, (list, tuple, np.ndarray)) and np.ndim(value) == 1
@@ -191,11 +190,7 @@ class MpcSettings:
                     _number(x) and x >= 0 for x in value)):
                 raise ValueError(f"'mpc.{name}' must be 3 numbers >= 0 (vx, vy, wz), got "
                                  f"{value!r}")
-        # flags and choices (a quoted "false" was a true flag; 'bogus' failed at the build)
-        for name in ("torque_limits", "stand_when_idle", "prepare_ahead"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ValueError(f"'mpc.{name}' must be true or false, got "
-                                 f"{getattr(self, name)!r}")
+        # choices ('bogus' failed at the build; flags: check_settings)
         for name, choices in (("clearance", CLEARANCES), ("inequality", INEQUALITIES)):
             if getattr(self, name) not in choices:
                 raise ValueError(f"'mpc.{name}' must be one of {list(choices)}, got "
