@@ -1930,30 +1930,35 @@ def _feed_layout(node, q: np.ndarray, k: int, extra_joint: str,
         node._on_odom(odom)
 
 
-def test_a_publishers_fixed_layout_is_said_once_repairs_stay_throttled(context, walking_mpc,
-                                                                      monkeypatch):
-    """A robot with a gripper sends two joints the model lacks in every JointState: the
-    note came every 2 s for as long as it ran (844 suppressed in a reviewer's run). Said
-    once; so is an odometry child frame that is not the base link (its twist is taken as
-    the base's), while the base link and an empty one are not."""
+@pytest.fixture
+def logged_node(context, walking_mpc, monkeypatch):
+    """A sim-time node whose warnings are kept, and the standing configuration."""
     node = sim_time_node(context, walking_mpc)
     log = _Logger()
     monkeypatch.setattr(node, "get_logger", lambda: log)
+    _, q = standing_configuration(walking_mpc.cfg)
     try:
-        _, q = standing_configuration(walking_mpc.cfg)
-        for k in range(3):
-            _feed_layout(node, q, k, "gripper_finger", ("imu_link", "base", ""))
-            node._last_warn.clear()  # as if the throttle period had passed
-        extra = [w for w in log.warnings if "gripper_finger" in w]
-        frames = [w for w in log.warnings if "child_frame_id" in w]
-        assert len(extra) == 1 and "said once" in extra[0], log.warnings
-        assert len(frames) == 1 and "'imu_link'" in frames[0] and "base" in frames[0]
+        yield node, log, q
     finally:
         node.destroy_node()
 
 
-def test_a_layout_that_changes_per_message_is_throttled_and_its_names_clipped(
-        context, walking_mpc, monkeypatch):
+def test_a_publishers_fixed_layout_is_said_once_repairs_stay_throttled(logged_node):
+    """A robot with a gripper sends two joints the model lacks in every JointState: the
+    note came every 2 s for as long as it ran (844 suppressed in a reviewer's run). Said
+    once; so is an odometry child frame that is not the base link (its twist is taken as
+    the base's), while the base link and an empty one are not."""
+    node, log, q = logged_node
+    for k in range(3):
+        _feed_layout(node, q, k, "gripper_finger", ("imu_link", "base", ""))
+        node._last_warn.clear()  # as if the throttle period had passed
+    extra = [w for w in log.warnings if "gripper_finger" in w]
+    frames = [w for w in log.warnings if "child_frame_id" in w]
+    assert len(extra) == 1 and "said once" in extra[0], log.warnings
+    assert len(frames) == 1 and "'imu_link'" in frames[0] and "base" in frames[0]
+
+
+def test_a_layout_that_changes_per_message_is_throttled_and_its_names_clipped(logged_node):
     """Extra joint names and odometry child frames that change from message to message made
     one 'said once' line each (757 lines in 2 s in an auditor's run, and a key kept per
     message); 200 000 extra names made one 2 MB line. Past ONCE_KEYS different ones the
@@ -1961,32 +1966,24 @@ def test_a_layout_that_changes_per_message_is_throttled_and_its_names_clipped(
     from horizon_mpc.nodes.mpc_inputs import NAMES_SHOWN
     from horizon_mpc.nodes.mpc_node import ONCE_KEYS
 
-    node = sim_time_node(context, walking_mpc)
-    log = _Logger()
-    monkeypatch.setattr(node, "get_logger", lambda: log)
-    try:
-        _, q = standing_configuration(walking_mpc.cfg)
-        for k in range(50):
-            _feed_layout(node, q, k, f"grip_{k}", (f"imu_{k}",))
-        extra = [w for w in log.warnings if "grip_" in w]
-        frames = [w for w in log.warnings if "child_frame_id" in w]
-        # ONCE_KEYS said once, then one throttled line (no wall time passed)
-        assert len(extra) == len(frames) == ONCE_KEYS + 1, log.warnings
-        assert "throttled" in extra[-1] and "throttled" in frames[-1]
-        assert sum(len(v) for v in node._said_once.values()) == 2 * ONCE_KEYS
-        many = [f"j{i:06d}_" + "x" * 100 for i in range(200_000)]
-        node._on_joint_state(joint_state_to_msg(
-            time_from_ns(12 * NS_PER_S), [*node.joint_names, *many],
-            np.append(q[7:], np.zeros(len(many))), np.zeros(len(q) - 7 + len(many))))
+    node, log, q = logged_node
+    for k in range(50):
+        _feed_layout(node, q, k, f"grip_{k}", (f"imu_{k}",))
+    extra = [w for w in log.warnings if "grip_" in w]
+    frames = [w for w in log.warnings if "child_frame_id" in w]
+    # ONCE_KEYS said once, then one throttled line (no wall time passed)
+    assert len(extra) == len(frames) == ONCE_KEYS + 1, log.warnings
+    assert "throttled" in extra[-1] and "throttled" in frames[-1]
+    assert sum(len(v) for v in node._said_once.values()) == 2 * ONCE_KEYS
+    many = [f"j{i:06d}_" + "x" * 100 for i in range(200_000)]
+    for k in range(2):  # the second after the throttle period, as it were
         node._last_warn.clear()
         node._on_joint_state(joint_state_to_msg(
-            time_from_ns(12 * NS_PER_S + 20_000_000), [*node.joint_names, *many],
+            time_from_ns(12 * NS_PER_S + k * 20_000_000), [*node.joint_names, *many],
             np.append(q[7:], np.zeros(len(many))), np.zeros(len(q) - 7 + len(many))))
-        line = log.warnings[-1]
-        assert f"and {len(many) - NAMES_SHOWN} more" in line and len(line) < 2000, line[:300]
-        assert node.rejected["joint_states"] == 0
-    finally:
-        node.destroy_node()
+    line = log.warnings[-1]
+    assert f"and {len(many) - NAMES_SHOWN} more" in line and len(line) < 2000, line[:300]
+    assert node.rejected["joint_states"] == 0
 
 
 @pytest.mark.parametrize("reliability", ["best_effort", "reliable"])
