@@ -13,9 +13,12 @@ own handlers take over: 0 for the nodes (a ROS node stopped is no error;
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import signal
+import sys
 import types
+from collections.abc import Iterator
 
 __all__ = ["closed_loop", "motion", "mpc_node", "sim_node"]
 
@@ -33,7 +36,8 @@ def _run(module: str, code: int = 0) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, exit_quietly)
     try:
-        mod = importlib.import_module(module)
+        with quiet_unraisable_exit(received):
+            mod = importlib.import_module(module)
     except Exception:
         if received:  # numpy's C extension turns the SystemExit into an ImportError
             return code
@@ -44,6 +48,25 @@ def _run(module: str, code: int = 0) -> int:
     if received:
         return code
     return mod.main()
+
+
+@contextlib.contextmanager
+def quiet_unraisable_exit(received: list[int]) -> Iterator[None]:
+    """Within the block, a SystemExit that Python cannot raise (the handler ran inside a
+    callback of the import system's module locks) is not printed once a signal was
+    ``received``: it printed "Exception ignored ... Traceback ... SystemExit: 130" (1 in
+    ~100 signals during the imports); the caller returns the signal's code all the same."""
+    previous = sys.unraisablehook
+
+    def hook(unraisable: object) -> None:
+        if not (received and isinstance(getattr(unraisable, "exc_value", None), SystemExit)):
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous
 
 
 def mpc_node() -> int:
