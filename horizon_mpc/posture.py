@@ -7,6 +7,7 @@ Only numeric Pinocchio is used here (no CasADi), so the simulator can use it too
 
 from __future__ import annotations
 
+import difflib
 import logging
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -95,7 +96,8 @@ def standing_configuration(
         ``(model, q)``: the free-flyer Pinocchio model and the configuration, shape (nq,).
 
     Raises:
-        ValueError: a ``nominal_posture`` without an SRDF to read it from (a config with
+        ValueError: a joint of ``nominal_joints`` the model does not have; a
+            ``nominal_posture`` without an SRDF to read it from (a config with
             ``urdf_path:`` and no ``robot:``) while joints are left unset; a posture joint
             outside its URDF limits (a robot started there was refused as a wrong reading
             by the MPC at every state, and a lockstep simulator waited forever); a
@@ -111,6 +113,15 @@ def standing_configuration(
     srdf = example_robot_files(cfg.robot).srdf if cfg.robot in known_robots() else None
     if srdf is not None and cfg.nominal_posture:
         values.update(srdf_joint_values(srdf, cfg.nominal_posture))
+    unknown = [name for name in cfg.nominal_joints if not model.existJointName(name)
+               or model.getJointId(name) < 2]
+    if unknown:
+        known = [model.names[j] for j in range(2, model.njoints)]
+        hints = {name: difflib.get_close_matches(name, known, n=1) for name in unknown}
+        said = ", ".join(f"{name!r}" + (f" (did you mean {hint[0]!r}?)" if hint else "")
+                         for name, hint in hints.items())
+        raise ValueError(f"config {cfg.name!r}: nominal_joints names joints the model does not "
+                         f"have: {said}; its joints are {known}")
     values.update(cfg.nominal_joints)
     for name, value in values.items():
         _set_joint(model, q, name, value)

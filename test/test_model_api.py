@@ -76,6 +76,55 @@ def test_limits_come_from_the_urdf_and_base_is_unbounded():
     assert m.joint_position_lower.shape == (12,)
 
 
+def _go2_urdf_with(attribute: str, value: str, count: int = 0, text: str | None = None) -> str:
+    """go2's URDF (or ``text``) with the first ``count`` (0: every) ``attribute`` set."""
+    import re
+
+    text = example_robot_files("go2").urdf.read_text() if text is None else text
+    return re.sub(rf'{attribute}="[^"]*"', f'{attribute}="{value}"', text, count=count)
+
+
+def test_limits_written_as_zero_are_no_limit_and_said(caplog):
+    """URDF exporters write effort="0" velocity="0" lower="0" upper="0" for unknown
+    limits (an auditor's go2 copies): the walking problem took them as bounds of zero, and
+    the robot fell at 0.36 s (effort), fell at 3 s (velocity) or stood still without a word
+    (a [0, 0] range)."""
+    with caplog.at_level("WARNING", logger="horizon_mpc.model.robot_model"):
+        effort = RobotModel.from_urdf(_go2_urdf_with("effort", "0"))
+    assert np.all(np.isinf(effort.joint_effort_limit))
+    assert effort.unset_limits["effort"] == GO2_JOINTS
+    assert "taken as no limit: effort (FL_hip_joint, " in caplog.text
+    assert "... 4 more" in caplog.text
+    velocity = RobotModel.from_urdf(_go2_urdf_with("velocity", "0", count=1))
+    assert velocity.unset_limits == {"position": [], "velocity": ["FL_hip_joint"],
+                                     "effort": []}
+    assert np.isinf(velocity.joint_velocity_limit[0])
+    assert np.all(np.isfinite(velocity.joint_velocity_limit[1:]))
+    ranges = RobotModel.from_urdf(_go2_urdf_with("upper", "0",
+                                                 text=_go2_urdf_with("lower", "0")))
+    assert ranges.unset_limits["position"] == GO2_JOINTS
+    assert np.all(np.isinf(ranges.q_lower)) and np.all(np.isinf(ranges.q_upper))
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="horizon_mpc.model.robot_model"):
+        go2 = RobotModel.from_example("go2")
+    assert go2.unset_limits == {"position": [], "velocity": [], "effort": []}
+    assert not caplog.text
+
+
+def test_a_urdf_floating_joint_under_a_free_flyer_is_refused():
+    """An auditor's go2 URDF with world -> base as a 'floating' joint: the model had two
+    free-flyers, was warned about as fixed to the world, then refused as having continuous
+    joints []."""
+    text = example_robot_files("go2").urdf.read_text()
+    at = text.index("<link")
+    text = (text[:at] + '<link name="world"/><joint name="floating_base" type="floating">'
+            '<parent link="world"/><child link="base"/></joint>' + text[at:])
+    with pytest.raises(ValueError, match=r"\['floating_base'\] are 'floating' joints.*"
+                                         "remove the floating joint"):
+        RobotModel.from_urdf(text)
+    assert RobotModel.from_urdf(text, floating_base=False).nq == 19
+
+
 def test_continuous_joints_take_cos_sin_and_are_unbounded():
     m = model("centauro_wheels")
     assert m.nq == m.nv + 1 + 4  # quaternion + four wheels

@@ -247,6 +247,24 @@ def test_a_config_the_robot_cannot_stand_with_is_refused_by_name(tmp_path):
     assert q[2] > 0.2
 
 
+def test_a_misspelt_nominal_joint_is_refused_with_the_name_it_meant(tmp_path):
+    """An auditor's config: nominal_joints {FL_thigh_jiont: 1.2} was dropped without a word
+    (the SRDF's 0.785 stood)."""
+    from horizon_mpc.posture import standing_configuration
+
+    cfg = _config(tmp_path, "robot: go2\nbase_link: base\n"
+                            "feet: [FL_foot, FR_foot, RL_foot, RR_foot]\n"
+                            "nominal_joints: {FL_thigh_jiont: 1.2, FR_calf_joint: -1.6}\n")
+    with pytest.raises(ValueError, match=r"does not have: 'FL_thigh_jiont' \(did you mean "
+                                         r"'FL_thigh_joint'\?\)"):
+        standing_configuration(cfg)
+    cfg = _config(tmp_path, "robot: go2\nbase_link: base\n"
+                            "feet: [FL_foot, FR_foot, RL_foot, RR_foot]\n"
+                            "nominal_joints: {root_joint: 0.1}\n")
+    with pytest.raises(ValueError, match="'root_joint'"):
+        standing_configuration(cfg)
+
+
 def test_a_relative_urdf_path_is_taken_from_the_configs_folder(tmp_path, monkeypatch):
     """It was taken from the working folder: a config with its URDF beside it worked from
     that folder only (session 28 audit)."""

@@ -392,6 +392,31 @@ def test_a_urdf_pybullet_cannot_load_is_refused_with_what_its_parser_said(tmp_pa
         p.disconnect(client)
 
 
+def test_an_empty_urdf_range_does_not_lock_the_joint(tmp_path):
+    """lower="0" upper="0" (an exporter's unknown range): pybullet locked every joint at 0,
+    and the standing go2 rose on straight legs (0.336 -> 0.436 m) under the MPC."""
+    import re
+
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.robots import example_robot_files
+
+    text = example_robot_files("go2").urdf.read_text()
+    text = re.sub(r'(lower|upper)="[^"]*"', r'\1="0"', text)
+    (tmp_path / "go2_no_ranges.urdf").write_text(text)
+    (tmp_path / "mine.yaml").write_text("robot: go2\nurdf_path: go2_no_ranges.urdf\n"
+                                        "feet: [FL_foot, FR_foot, RL_foot, RR_foot]\n")
+    finals = []
+    for cfg in ("go2", load_robot_config(str(tmp_path / "mine.yaml"))):
+        with Simulator(cfg) as sim:
+            target = sim.q_start[7:] + 0.2  # within go2's real ranges, 0 outside the empty
+            sim.set_trajectory(JointTrajectoryCommand(sim.joint_names, 0.0, np.array([0.0]),
+                                                      target[None, :]))
+            sim.step(round(0.5 / sim.dt))
+            finals.append(sim.state().q)
+    # locked, the joints stayed 0.12-0.2 rad from where go2's moved
+    np.testing.assert_allclose(finals[1], finals[0], atol=1e-6)
+
+
 def test_a_simulator_leaves_no_folder_behind(tmp_path, monkeypatch):
     """Each simulator left a /tmp/horizon_mpc_sim_* folder with its ground texture (377 on
     an auditor's host); the texture is loaded from a folder removed right after."""

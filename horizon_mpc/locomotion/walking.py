@@ -108,10 +108,9 @@ def build_walking_problem(model: RobotModel, cfg: RobotConfig,
                             clearance=None if st.clearance == "none" else st.clearance,
                             clearance_weight=st.weights.swing_height,
                             foot_radius=cfg.foot_radius)
-    # joint limits from the URDF
-    q_lo, q_hi = model.q_lower.copy(), model.q_upper.copy()
-    q.set_bounds(q_lo, q_hi)
-    v_lim = np.where(np.isfinite(model.v_limit), model.v_limit, np.inf)
+    # joint limits from the URDF (those written as zero are none: RobotModel.unset_limits)
+    q.set_bounds(model.q_lower, model.q_upper)
+    v_lim = model.v_limit.copy()
     v_lim[:6] = np.inf
     v.set_bounds(-v_lim, v_lim)
 

@@ -53,6 +53,7 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
         except (ValueError, RuntimeError) as exc:
             error = exc
     if model is not None:
+        _refuse_second_free_flyer(model, floating_base, source)
         _check_root(model, floating_base, source)
         _warn_mimic_joints(urdf if is_xml else path.read_text(errors="replace"), source)
         return model
@@ -93,6 +94,21 @@ def _warn_mimic_joints(text: str, source: str) -> None:
         log.warning("%s: mimic joints become independent joints of the model (%s); couple "
                     "them in your problem if they must move together", source,
                     ", ".join(f"{j} mimics {m}" for j, m in pairs))
+
+
+def _refuse_second_free_flyer(model: pin.Model, floating_base: bool, source: str) -> None:
+    """ValueError for a URDF ``floating`` joint when ``floating_base`` adds the free-flyer:
+    the model had two (a base above a 'world' link, warned about as a robot fixed to the
+    world, then refused as having continuous joints)."""
+    if not floating_base:
+        return
+    floating = [model.names[j] for j in range(2, model.njoints)
+                if model.joints[j].shortname() == "JointModelFreeFlyer"]
+    if floating:
+        raise ValueError(f"{source}: joint(s) {floating} are 'floating' joints, and "
+                         "floating_base=True adds the free-flyer above the root link itself: "
+                         "remove the floating joint and the link above it (e.g. 'world') "
+                         "from the URDF, or pass floating_base=False")
 
 
 def _check_root(model: pin.Model, floating_base: bool, source: str) -> None:

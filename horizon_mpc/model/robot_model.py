@@ -43,6 +43,12 @@ FIXED_BASE_ROBOTS = frozenset({"ur5", "panda"})
 _BIG = 1e300  # Pinocchio writes "no limit" as the largest double
 
 
+def _listed(names: list[str], shown: int = 8) -> str:
+    """``names`` joined by commas, the first ``shown`` of them and how many more."""
+    more = f", ... {len(names) - shown} more" if len(names) > shown else ""
+    return ", ".join(names[:shown]) + more
+
+
 class UnknownNameError(KeyError):
     """A frame, joint or posture name that the model does not have (message lists valid ones)."""
 
@@ -70,6 +76,9 @@ class RobotModel(SymbolicFunctions):
         mass: total mass (kg).
         q_lower, q_upper: (nq,) position limits (+-inf where unbounded).
         v_limit, effort_limit: (nv,) velocity / effort limits (inf where unbounded).
+        unset_limits: ``{"position" | "velocity" | "effort": [joint names]}``: the URDF's
+            limits of zero (a range with lower >= upper), read as no limit (inf) and
+            warned about.
         joint_position_lower, joint_position_upper, joint_velocity_limit, joint_effort_limit:
             the same limits per actuated joint, ``(len(joint_names),)``.
         joint_idx_q, joint_idx_v: joint name -> first index in q / v.
@@ -110,6 +119,7 @@ class RobotModel(SymbolicFunctions):
             if s.kind in ("free_flyer", "continuous"):
                 self.q_lower[s.idx_q : s.idx_q + s.nq] = -np.inf
                 self.q_upper[s.idx_q : s.idx_q + s.nq] = np.inf
+        self.unset_limits = self._drop_unset_limits(actuated)
         # continuous joints have nq = 2 and no position limit
         self.joint_position_lower = np.array([self.q_lower[s.idx_q] for s in actuated])
         self.joint_position_upper = np.array([self.q_upper[s.idx_q] for s in actuated])
@@ -123,6 +133,30 @@ class RobotModel(SymbolicFunctions):
         self._a = cs.SX.sym("a", self.nv)
         self._kin: dict[tuple[str, str], TreeKinematics] = {}
         self._functions: dict[tuple, cs.Function] = {}
+
+    def _drop_unset_limits(self, actuated: list) -> dict[str, list[str]]:
+        """Limits the URDF writes as zero read as no limit (inf), in place: an effort or
+        velocity <= 0 and a position range with lower >= upper (URDF exporters write 0 for
+        a value they do not know; a revolute joint's range defaults to [0, 0]: CENTAURO's
+        wheels). Bounds of zero made the walking problem infeasible (a go2 URDF with
+        ``effort="0"`` fell in 0.4 s) or froze the robot (``lower = upper = 0``: it stood
+        still, no word). Returns ``{"position" | "velocity" | "effort": [joint names]}``
+        of the limits so read, warned about once here."""
+        unset: dict[str, list[str]] = {"position": [], "velocity": [], "effort": []}
+        for s in actuated:
+            iq, iv = slice(s.idx_q, s.idx_q + s.nq), slice(s.idx_v, s.idx_v + s.nv)
+            if np.any(self.q_lower[iq] >= self.q_upper[iq]):
+                unset["position"].append(s.name)
+                self.q_lower[iq], self.q_upper[iq] = -np.inf, np.inf
+            for kind, limit in (("velocity", self.v_limit), ("effort", self.effort_limit)):
+                if np.any(limit[iv] <= 0.0):
+                    unset[kind].append(s.name)
+                    limit[iv] = np.inf
+        said = [f"{kind} ({_listed(names)})" for kind, names in unset.items() if names]
+        if said:
+            log.warning("%s: URDF limits of zero (or lower >= upper) taken as no limit: %s",
+                        self.name, "; ".join(said))
+        return unset
 
     # ------------------------------------------------------------------ construction
     @classmethod

@@ -326,13 +326,9 @@ def build_whole_body(model: RobotModel, feet: list[str], n_nodes: int, dt: float
         above[foot] = prb.create_constraint(term_name(foot, "above_ground"), z - floor[i],
                                             nodes=[], bounds=(0.0, np.inf))
 
-    # limits from the URDF (a joint whose lower and upper limits agree is left free: the
-    # URDF's way of writing "no limit", e.g. CENTAURO's wheels)
-    lo, hi = model.q_lower.copy(), model.q_upper.copy()
-    free = hi <= lo
-    lo[free], hi[free] = -np.inf, np.inf
-    q.set_bounds(lo, hi)
-    v_lim = np.where(np.isfinite(model.v_limit) & (model.v_limit > 0), model.v_limit, np.inf)
+    # limits from the URDF (those written as zero are none: RobotModel.unset_limits)
+    q.set_bounds(model.q_lower, model.q_upper)
+    v_lim = model.v_limit.copy()
     v_lim[:6] = np.inf
     v.set_bounds(-v_lim, v_lim)
     # initial state: at rest at q0

@@ -120,11 +120,8 @@ class MpcNode(MpcParameters, Node):
         mpc = self.mpc = self._controller(cfg, settings, mpc)
         self.joint_names = list(mpc.model.joint_names)
         # readings far outside these are refused (a wrong joint offset, a garbled message);
-        # an empty range (lower >= upper, e.g. centauro's wheels at [0, 0]) is no limit
-        lo, hi = mpc.model.q_lower[7:].copy(), mpc.model.q_upper[7:].copy()
-        none = lo >= hi
-        lo[none], hi[none] = -np.inf, np.inf
-        self._joint_limits = (lo, hi)
+        # an empty range (centauro's wheels at [0, 0]) is none (RobotModel.unset_limits)
+        self._joint_limits = (mpc.model.q_lower[7:].copy(), mpc.model.q_upper[7:].copy())
         self.period = 1.0 / self._p("control_rate")
         self.state_timeout = self._p("state_timeout")
         self.cmd_timeout = self._p("cmd_timeout")

@@ -10,6 +10,9 @@ Three things differ between pybullet's URDF importer and Pinocchio's, and are co
   make pybullet treat the robot as fixed-base.)
 * Inertia: taken from the file (``URDF_USE_INERTIA_FROM_FILE``), not recomputed from the
   collision shapes; pybullet's default per-link linear/angular velocity damping is removed.
+* An empty position range (``lower >= upper``, e.g. ``lower="0" upper="0"``): pybullet locks
+  the joint there (a go2 URDF written so stood up on straight legs); here, as for the model
+  (:attr:`horizon_mpc.model.RobotModel.unset_limits`), it is no limit.
 
 Joint damping from ``<dynamics damping>`` is applied by pybullet itself; joint friction is
 realised with pybullet's joint velocity motor (target velocity 0, max force = friction), which
@@ -39,6 +42,8 @@ _LOG = logging.getLogger(__name__)
 
 MASSLESS_LINK_MASS = 1e-5  # kg, given to links that have no <inertial> (Pinocchio: 0 kg)
 _MASSLESS_LINK_INERTIA = 1e-9  # kg m^2, principal moments of those links
+
+_NO_LIMIT = 1e9  # rad or m: the range given to a joint whose URDF range is empty
 
 _FILENAME = re.compile(r'filename\s*=\s*"([^"]*)"')
 
@@ -298,7 +303,12 @@ def load_robot(
         p.changeDynamics(body, idx, linearDamping=0.0, angularDamping=0.0,
                          lateralFriction=lateral_friction, physicsClientId=client)
     for j in joint_index.values():
-        friction = p.getJointInfo(body, j, physicsClientId=client)[7]
+        info = p.getJointInfo(body, j, physicsClientId=client)
+        friction, lower, upper = info[7], info[8], info[9]
+        if lower >= upper and info[2] in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
+            # changeDynamics cannot remove the limit: a range no motion reaches replaces it
+            p.changeDynamics(body, j, jointLowerLimit=-_NO_LIMIT, jointUpperLimit=_NO_LIMIT,
+                             physicsClientId=client)
         p.setJointMotorControl2(body, j, p.VELOCITY_CONTROL, targetVelocity=0.0,
                                 force=max(float(friction), 0.0), physicsClientId=client)
     dyn = p.getDynamicsInfo(body, -1, physicsClientId=client)
