@@ -185,6 +185,32 @@ def test_stale_command_freezes_where_the_reference_was():
     assert ref.holding
 
 
+def test_a_command_cut_short_as_stale_is_counted_and_a_short_one_is_not():
+    """A 1 s trajectory with a 0.25 s timeout stopped at a quarter without a word (an
+    auditor's 'this posture in 2 s', sent once)."""
+    ref = ReferenceGenerator(3, timeout=0.25)
+    ref.set_command(command(times=(0.0, 0.1, 0.2)).validate(JOINTS), now=0.0)
+    ref.reference(0.5)  # ran out: held its last point, nothing cut
+    assert ref.holding and ref.stale_cuts == 0 and ref.last_cut is None
+    ref.set_command(command(t0=1.0).validate(JOINTS), now=1.0)
+    ref.reference(1.3)
+    assert ref.holding and ref.stale_cuts == 1
+    assert ref.last_cut == pytest.approx((0.25, 1.0))
+
+
+def test_a_first_point_further_ahead_than_the_timeout_is_refused():
+    """Accepted (max_stamp_offset 1 s), a point 0.8 s ahead with a 0.5 s timeout was frozen
+    on the way, never reached."""
+    ref = ReferenceGenerator(3, timeout=0.5)
+    ref.hold(np.zeros(3), np.zeros(3))
+    ahead = JointTrajectoryCommand(JOINTS, 0.8, [0.0], np.array([[0.0, 0.2, 0.0]]))
+    with pytest.raises(ValueError, match=r"0.800 s ahead, beyond trajectory_timeout \(0.5 s\)"):
+        ref.set_command(ahead.validate(JOINTS), now=0.0)
+    assert ref.holding
+    ref.set_command(ahead.validate(JOINTS), now=0.4)  # 0.4 s ahead: reached
+    np.testing.assert_allclose(ref.reference(0.8)[0], [0.0, 0.2, 0.0])
+
+
 def test_future_first_point_starts_from_the_current_reference():
     ref = ReferenceGenerator(3, timeout=10.0)
     ref.hold(np.zeros(3), np.zeros(3))

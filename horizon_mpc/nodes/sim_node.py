@@ -63,6 +63,11 @@ _FREE_RUN_SLICE = 0.002  # s (wall) of stepping per callback when running as fas
 #: s (wall): a lockstep controller of joint_states and joint_trajectory gets the first state
 #: this long after it was seen without an odom subscriber (one of the joints only)
 ODOM_GRACE = 0.5
+#: s (wall): the least a lockstep simulator waits for its controller before the first state
+#: (lockstep_timeout if longer; never with lockstep_timeout 0): DDS discovery between two
+#: processes started together took 1.3-3.6 s on a loaded machine, and 3 of 5 lockstep runs
+#: started without their controller with the 1 s of lockstep_timeout alone
+START_WAIT = 10.0
 
 
 #: the lockstep emulation of a real-time loop's delays (doc/simulator.md), sim s
@@ -131,7 +136,8 @@ SIM_PARAMETERS = [
     ("push_duration", 0.1, "duration of an external_wrench push (s)",
      float_range(1e-3, 60)),
     ("trajectory_timeout", 0.5,
-     "a trajectory older than this (sim s) is stale: the robot holds",
+     "a trajectory older than this (sim s) is stale: the robot holds (a longer one is cut "
+     "there, with a warning)",
      float_range(1e-3, 1e3)),
     ("max_stamp_offset", 1.0,
      "trajectories stamped further than this from now (sim s) are rejected",
@@ -190,12 +196,14 @@ class SimNode(Node):
                 max_stamp_offset=par("max_stamp_offset"),
             )
         except (ValueError, RuntimeError, OSError) as exc:
-            given = self._description_file is not None
+            path = self._description_file
             self._remove_description_file()
-            if not given:
+            if path is None:
                 raise
-            # name the parameter, not the temporary file the text was written to
-            raise ValueError(f"robot_description: {exc}") from None
+            # name the parameter, not the temporary file the text was written to (and is
+            # gone: 'The file /tmp/robot_description_j0a93tq3.urdf does not contain...')
+            said = str(exc).replace(f"The file {path}", "The text").replace(path, "the text")
+            raise ValueError(f"robot_description: {said}") from None
         except BaseException:
             self._remove_description_file()
             raise
@@ -223,6 +231,7 @@ class SimNode(Node):
         self.rejected_trajectories = 0
         self.rejected_wrenches = 0
         self._last_warn: dict[str, float] = {}
+        self._stale_cuts_seen = 0
         self._suppressed: dict[str, int] = {}
 
         self._pub_joints = self.create_publisher(JointState, "joint_states", 10)
@@ -236,7 +245,8 @@ class SimNode(Node):
         # lockstep bookkeeping: the stamp (ns) of the state awaiting an answer
         self.awaiting_stamp_ns: int | None = None
         self._started = not self.lockstep
-        self._deadline = self._wall_deadline()
+        self._deadline = (time.monotonic() + max(self.lockstep_timeout, START_WAIT)
+                          if self.lockstep_timeout > 0 else math.inf)
         self._controller_seen: float | None = None  # wall time, see peers_ready
         # free-running pacing anchors (wall ns, sim ns)
         self._anchor: tuple[int, int] | None = None
@@ -316,6 +326,14 @@ class SimNode(Node):
         return round(self.sim.time * NS_PER_S)
 
     def _publish_state(self, awaiting: bool = False) -> int:
+        cuts = self.sim.reference.stale_cuts
+        if cuts != self._stale_cuts_seen:
+            self._stale_cuts_seen = cuts
+            followed, length = self.sim.reference.last_cut
+            self._warn("stale", f"joint_trajectory went stale {followed:g} s after it came, "
+                       f"{length - followed:.3f} s before its last point "
+                       f"(trajectory_timeout {followed:g} s): the robot holds where its "
+                       "reference was; send the next one sooner, or raise trajectory_timeout")
         stamp_ns = self.now_ns
         stamp = time_from_ns(stamp_ns)
         st = self.sim.state()
@@ -398,8 +416,8 @@ class SimNode(Node):
                 if not self.peers_ready:
                     self.get_logger().warning(
                         "lockstep: no controller connected (joint_states and odom "
-                        "subscribers, joint_trajectory publisher) after lockstep_timeout; "
-                        "starting anyway")
+                        f"subscribers, joint_trajectory publisher) after "
+                        f"{max(self.lockstep_timeout, START_WAIT):g} s; starting anyway")
                 self._started = True
                 self._publish_state(awaiting=True)
             return

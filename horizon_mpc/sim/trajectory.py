@@ -207,6 +207,10 @@ class ReferenceGenerator:
         self._coef = np.zeros((0, 4, 2 * n_joints))  # (K - 1, 4, 2 nj)
         self._segment = 0
         self._received = 0.0
+        #: commands frozen as stale before their last point, and the last of them:
+        #: (sim s followed, sim s it was long, both from its arrival)
+        self.stale_cuts = 0
+        self.last_cut: tuple[float, float] | None = None
 
     @property
     def holding(self) -> bool:
@@ -224,9 +228,17 @@ class ReferenceGenerator:
 
         Raises:
             ValueError: its first point lies ahead of ``now`` and reaching it from the current
-                reference is beyond :data:`PLAUSIBLE_SPEED` (nothing changes then).
+                reference is beyond :data:`PLAUSIBLE_SPEED`, or further ahead than the
+                timeout (it would be stale before it is reached); nothing changes then.
         """
         times = cmd.t0 + np.asarray(cmd.times, dtype=float)
+        if times[0] - now > self.timeout:
+            # accepted, it was never reached: frozen as stale on the way (an auditor's point
+            # 0.8 s ahead stayed at a quarter of its way)
+            raise ValueError(f"the first point is {times[0] - now:.3f} s ahead, beyond "
+                             f"trajectory_timeout ({self.timeout:g} s): the command would be "
+                             "stale (held) before it is reached; send it later or raise "
+                             "trajectory_timeout")
         k, nj = cmd.positions.shape
         q = np.asarray(cmd.positions, dtype=float)
         has_v = cmd.velocities is not None
@@ -264,6 +276,9 @@ class ReferenceGenerator:
             return self._hold
         if t - self._received > self.timeout:  # stale: freeze where the reference was
             q, _, tau = self._interpolate(times, min(self._received + self.timeout, times[-1]))
+            if times[-1] > self._received + self.timeout:
+                self.stale_cuts += 1
+                self.last_cut = (self.timeout, float(times[-1] - self._received))
             self.hold(q, tau)
             return self._hold
         if t >= times[-1]:  # ran out: hold the last point
