@@ -605,8 +605,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--profile", default=DEFAULT_PROFILE,
                     help="command profile: a YAML file, or the name of one in "
                          "config/commands (default: 'default')")
-    ap.add_argument("--out", default="out/closed_loop", help="output folder")
-    ap.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    ap.add_argument("--out", default="out/closed_loop",
+                    help="output folder (default out/closed_loop)")
+    ap.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
+                    help="lockstep (default: the simulator waits for each plan) or "
+                    "realtime (the MPC node in a process of its own)")
     ap.add_argument("--duration", type=float, default=None,
                     help="sim seconds to run (default: the profile's length)")
     ap.add_argument("--iterations", type=int, default=None,
