@@ -1896,6 +1896,22 @@ def test_a_node_waiting_for_its_states_says_so_on_diagnostics(context, walking_m
         node.destroy_node()
 
 
+def test_a_remapped_input_is_named_with_its_topic(context, walking_mpc):
+    """-r joint_states:=/foo: the node still said it waited for 'joint_states' (an
+    auditor, as a ROS user)."""
+    walking_mpc.t_last = None
+    node = MpcNode(parameter_overrides=[Parameter("trigger", value="state")], mpc=walking_mpc,
+                   context=context, cli_args=["--ros-args", "-r", "joint_states:=/foo"])
+    node._pub_diag = Sent()
+    try:
+        node._check_progress()
+        status = node._pub_diag.msgs[-1].status[0]
+        assert status.message == ("waiting for joint_states (remapped to /foo) and odom: "
+                                  "not planning")
+    finally:
+        node.destroy_node()
+
+
 def test_use_sim_time_outside_ros_args_is_no_parameter(walking_mpc):
     """'-p use_sim_time:=false' before --ros-args is ignored by rcl (warned about as a plain
     argument) and must not switch the sim-time default off either."""

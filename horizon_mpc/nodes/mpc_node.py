@@ -290,6 +290,8 @@ class MpcNode(MpcParameters, Node):
              "state_reliability"),
             (self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, cmd_qos),
              "cmd_reliability"))
+        self._input_topics = dict(zip(("joint_states", "odom", "cmd_vel"),
+                                      (sub.topic_name for sub, _ in self._inputs), strict=True))
         accept_integers_for_floats(self)  # ros2 param set /mpc max_vx 1
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if self.trigger == "timer":
@@ -300,9 +302,16 @@ class MpcNode(MpcParameters, Node):
         self._watch = (0, 0, self.get_clock().now().nanoseconds)
         self.create_timer(_WATCH_PERIOD, self._check_progress,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.get_logger().info(f"waiting for joint_states and odom (trigger: {self.trigger})")
+        self.get_logger().info(f"waiting for {self._input('joint_states')} and "
+                               f"{self._input('odom')} (trigger: {self.trigger})")
 
     # ------------------------------------------------------------------ helpers
+    def _input(self, name: str) -> str:
+        """An input's name for the log: ``name``, with the topic it was remapped to
+        (``-r joint_states:=/foo``: the node said it waited for joint_states)."""
+        topic = self._input_topics[name]
+        return name if topic.rsplit("/", 1)[-1] == name else f"{name} (remapped to {topic})"
+
     def _default_to_sim_time(self) -> None:
         """``use_sim_time`` true unless it was set for this node (a ``-p``, a params-file
         section matching it, an override): rcl has resolved those into the node's
@@ -368,8 +377,8 @@ class MpcNode(MpcParameters, Node):
         if self._joints is None or self._base is None:
             # a node waiting for its inputs says so on /diagnostics too: an aggregator saw
             # nothing of it, as of a node that is not running
-            missing = [n for n, x in (("joint_states", self._joints), ("odom", self._base))
-                       if x is None]
+            missing = [self._input(n) for n, x in (("joint_states", self._joints),
+                                                   ("odom", self._base)) if x is None]
             self._publish_diagnostics(None, clock_ns, clock_ns, force=True, waiting=(
                 f"waiting for {' and '.join(missing)}: not planning"))
         prev_states, prev_ticks, prev_clock = self._watch
@@ -566,8 +575,8 @@ class MpcNode(MpcParameters, Node):
         (solve longer than the control period) only counts a deadline miss.
         """
         if self._joints is None or self._base is None:
-            missing = [n for n, x in (("joint_states", self._joints), ("odom", self._base))
-                       if x is None]
+            missing = [self._input(n) for n, x in (("joint_states", self._joints),
+                                                   ("odom", self._base)) if x is None]
             since = "since the clock went back" if self.plan is not None else "received yet"
             self._warn("no_state", f"no {' and no '.join(missing)} {since}; not planning")
             return False
