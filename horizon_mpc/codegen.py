@@ -141,15 +141,17 @@ def default_cache_dir() -> Path:
     """The cache directory (see the module docstring); not created here."""
     env = os.environ.get("HORIZON_MPC_CACHE_DIR")
     if env:
-        return Path(env).expanduser()
+        # absolute: dlopen (ctypes) reads a bare file name as one to search the system's
+        # library paths for ('.' ran the compiled Riccati recursion never, rebuilt each run)
+        return Path(env).expanduser().absolute()
     xdg = os.environ.get("XDG_CACHE_HOME")
     base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
-    return base / "horizon_mpc"
+    return (base / "horizon_mpc").absolute()
 
 
 def _cache_folder(folder: str | Path | None) -> Path:
-    """``folder`` (user-expanded), or :func:`default_cache_dir` when None."""
-    return Path(folder).expanduser() if folder is not None else default_cache_dir()
+    """``folder`` (user-expanded, absolute), or :func:`default_cache_dir` when None."""
+    return Path(folder).expanduser().absolute() if folder is not None else default_cache_dir()
 
 
 def function_name(text: str) -> str:
@@ -382,7 +384,12 @@ def _warn_uncompiled(reason: str) -> None:
 def library_damage(lib: Path) -> str | None:
     """Why the shared library file ``lib`` cannot be a complete one, or None. ELF (Linux):
     the magic number and the section header table, which the linker writes last, inside the
-    file; elsewhere only emptiness is checked."""
+    file; elsewhere only emptiness is checked. Then its checksum (:func:`checksum_path`)."""
+    return _structure_damage(lib) or _checksum_damage(lib)
+
+
+def _structure_damage(lib: Path) -> str | None:
+    """:func:`library_damage` without the checksum."""
     try:
         with open(lib, "rb") as fh:
             head = fh.read(64)
@@ -404,7 +411,7 @@ def library_damage(lib: Path) -> str | None:
                                         struct.unpack_from(order + "HH", head, 0x2E))
     if shoff + shentsize * shnum > size:
         return f"truncated ({size} bytes, its section table ends at {shoff + shentsize * shnum})"
-    return _checksum_damage(lib)
+    return None
 
 
 def checksum_path(lib: Path) -> Path:
@@ -508,6 +515,12 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
         returncode, stderr = _run_compiler(cmd)
         if returncode != 0:
             raise CompilerError(f"compiling {what} failed ({' '.join(cmd)}):\n{stderr[-2000:]}")
+        # a compiler that says it succeeded: its output checked before it is ever loaded (a
+        # truncated one was a SIGBUS at every start, the cache's check seeing it only later)
+        damage = "not written" if not tmp_lib.is_file() else _structure_damage(tmp_lib)
+        if damage:
+            raise CompilerError(f"compiling {what}: the compiler exited 0 and its library is "
+                                f"{damage} ({' '.join(cmd)})")
         # the checksum first: a reader seeing a library sees its checksum or a newer one
         # (two processes building at once: a mismatch, one rebuild; never a damaged load)
         tmp_sum = work / checksum_path(lib).name
@@ -558,7 +571,10 @@ def cache_max_bytes() -> int | None:
 class CacheInfo:
     """What a cache folder holds: ``libraries`` (count), ``bytes``, the modification
     times (s since the epoch) of the least and most recently used library, and ``recent``,
-    the libraries used in the last :data:`PRUNE_SPARE_S` seconds (never pruned)."""
+    the libraries used in the last :data:`PRUNE_SPARE_S` seconds (never pruned);
+    ``builds``, ``build_bytes``: the unfinished build folders (a build running, or one a
+    killed process left: a build removes those after :data:`STALE_BUILD_S`, ``clear``
+    after :data:`PRUNE_SPARE_S`)."""
 
     folder: Path
     libraries: int
@@ -566,6 +582,8 @@ class CacheInfo:
     oldest: float | None
     newest: float | None
     recent: int
+    builds: int = 0
+    build_bytes: int = 0
 
 
 #: the cache's library names, ``<function>_<24 hex digits of the key>.so``
@@ -575,9 +593,12 @@ _LIBRARY_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*_[0-9a-f]{24}\.so")
 def _libraries(folder: Path) -> list[tuple[float, int, Path]]:
     """(mtime, size, path) of the cache's libraries, least recently used first."""
     out = []
-    for lib in folder.glob("*.so"):
-        if not _LIBRARY_NAME.fullmatch(lib.name):  # not one of ours (libcasadi.so...)
+    # listed first: Path.glob skips a folder it cannot read, and an unreadable cache was
+    # reported as empty (`clear`: 'removed 0 libraries', exit 0)
+    for name in os.listdir(folder):
+        if not _LIBRARY_NAME.fullmatch(name):  # not one of ours (libcasadi.so...)
             continue
+        lib = folder / name
         with contextlib.suppress(OSError):
             st = lib.stat()
             out.append((st.st_mtime, st.st_size, lib))
@@ -588,20 +609,35 @@ def cache_info(folder: str | Path | None = None) -> CacheInfo:
     """The libraries of the cache ``folder`` (default :func:`default_cache_dir`)."""
     folder = _cache_folder(folder)
     libs = _libraries(folder) if folder.is_dir() else []
+    builds = [_tree_bytes(b) for b in folder.glob(".build_*")] if folder.is_dir() else []
     now = time.time()
     return CacheInfo(folder, len(libs), sum(size for _, size, _ in libs),
                      libs[0][0] if libs else None, libs[-1][0] if libs else None,
-                     sum(now - mtime < PRUNE_SPARE_S for mtime, _, _ in libs))
+                     sum(now - mtime < PRUNE_SPARE_S for mtime, _, _ in libs),
+                     len(builds), sum(builds))
+
+
+def _tree_bytes(folder: Path) -> int:
+    """The bytes of the files under ``folder`` (those it can see)."""
+    total = 0
+    for root, _, files in os.walk(folder):
+        for name in files:
+            with contextlib.suppress(OSError):
+                total += os.lstat(os.path.join(root, name)).st_size
+    return total
 
 
 def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
-                keep: tuple[Path, ...] = (), spare_s: float = PRUNE_SPARE_S) -> list[Path]:
+                keep: tuple[Path, ...] = (), spare_s: float = PRUNE_SPARE_S,
+                undeletable: list[str] | None = None) -> list[Path]:
     """Delete the least recently used libraries of ``folder`` (default
     :func:`default_cache_dir`) while it holds more than ``max_bytes`` (-1: the bound of
     :func:`cache_max_bytes`; None: no bound, nothing deleted). Spared: ``keep``, the
     libraries this process loaded and those used in the last ``spare_s`` seconds (a
     process that already loaded a deleted library keeps it; one about to load it rebuilds
-    it). Returns the deleted paths.
+    it). With ``max_bytes`` 0 (clear), build folders older than :data:`PRUNE_SPARE_S` go
+    too. Returns the deleted paths; ``undeletable``, if given, gets the libraries that
+    could not be removed (name: reason).
 
     Raises:
         ValueError: a malformed ``$HORIZON_MPC_CACHE_MAX_MB`` (with ``max_bytes`` -1).
@@ -614,7 +650,8 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
     libs = _libraries(folder)
     total = sum(size for _, size, _ in libs)
     spared = {str(p) for p in keep} | set(_LOADED)
-    now, deleted, undeletable = time.time(), [], []
+    now, deleted = time.time(), []
+    undeletable = [] if undeletable is None else undeletable
     for mtime, size, lib in libs:
         if total <= max_bytes and max_bytes > 0:  # 0 (clear): empty files go too
             break
@@ -632,7 +669,8 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
         with contextlib.suppress(OSError):
             checksum_path(lib).unlink(missing_ok=True)
         total -= size
-    if max_bytes == 0:  # clear: checksums whose library is gone too
+    if max_bytes == 0:  # clear: build folders killed processes left, orphan checksums
+        _remove_stale_builds(folder, PRUNE_SPARE_S)
         for orphan in folder.glob("*.so.sha256"):
             if _LIBRARY_NAME.fullmatch(orphan.name[:-7]) and not orphan.with_suffix("").exists():
                 with contextlib.suppress(OSError):
@@ -646,11 +684,11 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
     return deleted
 
 
-def _remove_stale_builds(folder: Path) -> None:
+def _remove_stale_builds(folder: Path, age_s: float = STALE_BUILD_S) -> None:
     now = time.time()
     for old in folder.glob(".build_*"):
         with contextlib.suppress(OSError):
-            if now - old.stat().st_mtime > STALE_BUILD_S:
+            if now - old.stat().st_mtime > age_s:
                 shutil.rmtree(old, ignore_errors=True)
 
 

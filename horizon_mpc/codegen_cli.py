@@ -39,12 +39,15 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--max-mb must be a number of MB > 0, got {args.max_mb:g} (`clear` "
                      "empties the cache; HORIZON_MPC_CACHE_MAX_MB=0 leaves it unbounded)")
     bound = None
+    failed: list[str] = []
     try:
         if args.command == "clear":
-            removed = codegen.prune_cache(args.dir, max_bytes=0, spare_s=0.0)
+            removed = codegen.prune_cache(args.dir, max_bytes=0, spare_s=0.0,
+                                          undeletable=failed)
         elif args.command == "prune":
             bound = codegen.cache_max_bytes() if args.max_mb is None else int(args.max_mb * 1e6)
-            removed = codegen.prune_cache(args.dir, max_bytes=bound)
+            removed = codegen.prune_cache(args.dir, max_bytes=bound, undeletable=failed)
+        info = codegen.cache_info(args.dir)
     except ValueError as exc:
         parser.error(str(exc))
     except OSError as exc:  # a cache folder that cannot be read
@@ -52,12 +55,17 @@ def main(argv: list[str] | None = None) -> int:
                        f"{exc.strerror or exc}\n")
     if args.command != "info":
         print(f"removed {len(removed)} libraries")
-    info = codegen.cache_info(args.dir)
     when = (time.strftime("%Y-%m-%d %H:%M", time.localtime(info.oldest))
             if info.oldest is not None else "-")
+    builds = (f"; {info.builds} unfinished build folders, {info.build_bytes / 1e6:.1f} MB (a "
+              "build running, or one a killed process left)" if info.builds else "")
     print(f"{info.folder}: {info.libraries} libraries, {info.bytes / 1e6:.1f} MB "
-          f"(least recently used {when})"
+          f"(least recently used {when})" + builds
           + ("" if info.folder.is_dir() else "; no such folder yet (made at the first build)"))
+    if failed:
+        print(f"{len(failed)} libraries could not be removed: {'; '.join(failed[:3])}",
+              file=sys.stderr)
+        return 1
     if args.command == "prune" and bound is None:
         print("no bound (HORIZON_MPC_CACHE_MAX_MB=0): nothing to prune")
     elif args.command == "prune" and info.bytes > bound:

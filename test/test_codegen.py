@@ -579,3 +579,75 @@ def test_a_cc_that_does_not_split_and_the_reasons_a_build_failed(tmp_path):
                                    "expression at end of input")
     assert codegen._uncompiled_reason(syntax, tmp_path).endswith("error: expected expression "
                                                                  "at end of input")
+
+
+def test_a_relative_cache_folder_loads_its_libraries(tmp_path, monkeypatch):
+    """HORIZON_MPC_CACHE_DIR=. : dlopen took the bare file name of a library as one to search
+    the system's library paths for (the compiled Riccati recursion never loaded and was
+    rebuilt at every run)."""
+    from horizon_mpc.solvers.ilqr.evaluation import GeneratedFunction
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("HORIZON_MPC_CACHE_DIR", ".")
+    monkeypatch.delenv("HORIZON_MPC_NO_CODEGEN", raising=False)
+    assert codegen.default_cache_dir() == tmp_path
+    fn = codegen.compile_function(_small_function())
+    assert codegen.compiled_library(fn).is_absolute()
+    GeneratedFunction.bind(fn)  # ctypes loads it by its path
+
+
+@pytest.mark.parametrize("tail, said", [('truncate -s 1000 "$out"', "truncated (1000 bytes"),
+                                        ('rm -f "$out"', "not written")])
+def test_a_compiler_output_that_is_not_a_whole_library_is_never_loaded(
+        cache, monkeypatch, caplog, tail, said):
+    """A compiler that exits 0 with a truncated library: loaded at once (SIGBUS at every
+    start; the cache's check saw it only at the next); one that wrote nothing was blamed on
+    the cache folder."""
+    cc = cache / "cc.sh"
+    cc.write_text('#!/bin/sh\nout=""; prev=""\nfor a in "$@"; do [ "$prev" = "-o" ] && '
+                  f'out="$a"; prev="$a"; done\ngcc "$@" || exit 1\n{tail}\n')
+    cc.chmod(0o755)
+    monkeypatch.setattr(codegen, "CC_ARGV", (str(cc),))
+    monkeypatch.setattr(codegen, "_UNCOMPILED_WARNED", set())
+    fn = _small_function()
+    with caplog.at_level("WARNING", logger="horizon_mpc.codegen"):
+        assert codegen.compile_function(fn) is fn  # uncompiled, the process alive
+    assert said in caplog.text and "running them uncompiled" in caplog.text
+    assert "HORIZON_MPC_CACHE_DIR" not in caplog.text
+    assert not list(cache.glob("*.so"))
+
+
+def test_cache_command_line_on_an_unreadable_folder_unremovable_files_and_builds(
+        cache, monkeypatch, capsys):
+    """An unreadable cache was 'empty' (clear: 'removed 0 libraries', exit 0); libraries
+    clear could not remove ended in exit 0; the build folders killed processes left were
+    neither counted nor cleared."""
+    from horizon_mpc import codegen_cli
+
+    _fake_libraries(cache, {"old": 9000})
+    stale, running = cache / ".build_stale", cache / ".build_running"
+    for folder in (stale, running):
+        folder.mkdir()
+        (folder / "x.c").write_bytes(b"\0" * 3000)
+    os.utime(stale, (time.time() - 2 * codegen.PRUNE_SPARE_S,) * 2)
+    assert codegen_cli.main(["info"]) == 0
+    assert "2 unfinished build folders, 0.0 MB" in capsys.readouterr().out
+    (cache / _lib("stuck")).mkdir()  # unlink fails: IsADirectoryError
+    assert codegen_cli.main(["clear"]) == 1
+    out, err = capsys.readouterr()
+    assert "removed 1 libraries" in out and "1 libraries could not be removed" in err
+    assert not stale.exists() and running.exists()  # a build running is left alone
+
+    real = os.listdir
+
+    def unreadable(path="."):
+        if Path(path) == cache:
+            raise PermissionError(13, "Permission denied", str(path))
+        return real(path)
+
+    monkeypatch.setattr(os, "listdir", unreadable)
+    for command in ("info", "clear"):
+        with pytest.raises(SystemExit) as exited:
+            codegen_cli.main([command])
+        assert exited.value.code == 1
+        assert "Permission denied" in capsys.readouterr().err
