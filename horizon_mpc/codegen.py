@@ -679,7 +679,7 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
         _log.warning("codegen cache %s: %d libraries could not be removed (%s)", folder,
                      len(undeletable), "; ".join(undeletable[:3]))
     if deleted:
-        _log.info("codegen cache %s: removed %d least recently used libraries (bound %.0f MB, "
+        _log.info("codegen cache %s: removed %d least recently used libraries (bound %g MB, "
                   "HORIZON_MPC_CACHE_MAX_MB)", folder, len(deleted), max_bytes / 1e6)
     return deleted
 
