@@ -46,6 +46,7 @@ from horizon_mpc.closed_loop_profile import (
     load_profile,
     load_pushes,
     unreached_segments,
+    with_zero_tail,
 )
 from horizon_mpc.closed_loop_report import (
     FRAME_PERIOD,
@@ -170,6 +171,7 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
     segments = list(segments or load_profile(DEFAULT_PROFILE))
     if duration is None:
         duration = sum(s.duration for s in segments)
+    segments = with_zero_tail(segments, duration)
     if mode not in ("lockstep", "realtime"):
         raise ValueError(f"mode must be 'lockstep' or 'realtime', got {mode!r}")
     cfg = load_robot_config(robot)  # an unknown robot fails here, before any node or process
@@ -645,6 +647,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         segments, pushes, mpc_parameters = _checked_arguments(args, profile)
         sim_parameters = _sim_parameters(args)
+        length = sum(seg.duration for seg in segments)
+        segments = with_zero_tail(segments, args.duration)
+        if args.duration is not None and args.duration > length + 1e-9:
+            log.info("--duration %g s runs %g s past the profile's end: the command is zero "
+                     "then (segment %d of the summary)", args.duration,
+                     args.duration - length, len(segments) - 1)
     except (ValueError, FileNotFoundError, KeyError) as exc:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         log.error("cannot run: %s", message)

@@ -16,7 +16,8 @@ from horizon_mpc.nodes.mpc_inputs import ABSURD_COMMAND
 from horizon_mpc.sim.simulator import PLAUSIBLE_WRENCH
 
 __all__ = ["DEFAULT_PROFILE", "MAX_COMMAND", "MAX_PUSH", "Push", "Segment", "command_at",
-           "load_profile", "load_pushes", "profile_file", "unreached_segments"]
+           "load_profile", "load_pushes", "profile_file", "unreached_segments",
+           "with_zero_tail"]
 
 DEFAULT_PROFILE = "default"  # config/commands/default.yaml (installed under share/horizon_mpc)
 
@@ -166,14 +167,25 @@ def command_at(segments: Sequence[Segment], t: float) -> np.ndarray:
     return np.zeros(3)
 
 
+def with_zero_tail(segments: Sequence[Segment], duration: float | None) -> list[Segment]:
+    """``segments`` with a zero command ``Segment`` for the time ``duration`` (s) runs past
+    their end (the command after a profile is zero: a run longer than its profile stood
+    there, and its summary listed no segment for that time)."""
+    segments = list(segments)
+    extra = (duration or 0.0) - sum(s.duration for s in segments)
+    if extra > 1e-9:
+        segments.append(Segment(extra))
+    return segments
+
+
 def unreached_segments(segments: Sequence[Segment], max_velocity: Sequence[float],
                        max_acceleration: Sequence[float],
                        max_command_norm: float = DEFAULT_MAX_NORM) -> list[tuple[int, float]]:
     """The segments (index, ramp time in s) whose command the MPC's ramp (each axis at most
     ``max_acceleration``, commands limited as the MPC does: ``max_velocity`` per axis and
     ``max_command_norm`` combined, :func:`~horizon_mpc.locomotion.command.limit_command`)
-    cannot reach from the one before within the segment; the last segment is left out (it
-    is held to the end). An axis with a zero acceleration never moves: inf.
+    cannot reach from the one before within the segment; the last segment is left out (no
+    command follows it). An axis with a zero acceleration never moves: inf.
 
     The robot follows the ramped command, not the profile's: go2 under +-0.4 m/s flipped
     every 0.5 s (1 m/s^2 needs 0.8 s for a flip) ran a command between -0.1 and +0.4 and

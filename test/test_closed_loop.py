@@ -598,12 +598,15 @@ def test_a_long_runs_gif_frames_are_spread_out_to_bound_their_memory():
     from horizon_mpc.closed_loop_report import MAX_GIF_FRAMES, gif_frame_period
 
     assert gif_frame_period(10.0) == 0.05 and gif_frame_period(19.95) == 0.05
-    for duration in (20.0, 40.0, 100.0, 600.0):  # frames at both ends: at most MAX in all
+    for duration in (20.0, 38.0, 40.0, 100.0, 600.0):  # frames at both ends: at most MAX
         period = gif_frame_period(duration)
-        assert len(np.arange(0.0, duration + 1e-9, period)) == MAX_GIF_FRAMES, duration
+        assert 0.8 * MAX_GIF_FRAMES < len(np.arange(0.0, duration + 1e-9, period)) \
+            <= MAX_GIF_FRAMES, duration
+        # whole centiseconds, what a GIF stores (95.2 ms played as 90: 5 % fast)
+        assert period * 100 == pytest.approx(round(period * 100), abs=1e-9), duration
+    assert gif_frame_period(38.0) == 0.1
     assert gif_frame_period(math.inf) == 0.05
-    assert _Loop([Segment(40.0)], 40.0, True, 1.0, []).rec.frame_period == pytest.approx(
-        40.0 / (MAX_GIF_FRAMES - 1))
+    assert _Loop([Segment(40.0)], 40.0, True, 1.0, []).rec.frame_period == 0.11
 
 
 def test_an_unknown_robot_fails_before_any_process_starts(started_processes):
@@ -990,3 +993,26 @@ def test_the_ramp_warning_uses_the_nodes_command_limits(caplog):
     with caplog.at_level("WARNING", logger="horizon_mpc.closed_loop"):
         warn_unreached_segments(walk, cfg, {"gait": "walk"})
     assert "segment(s) [1] end before the command's ramp (0.4 s" in caplog.text
+
+
+def test_a_duration_past_the_profile_is_a_zero_command_segment_of_its_own(tmp_path, caplog):
+    """--duration 9 on a 5 s profile: 4 s of zero command, in no segment of the summary
+    (its distance counted all the same), without a word (an auditor's endurance run)."""
+    from horizon_mpc.closed_loop import main
+    from horizon_mpc.closed_loop_profile import with_zero_tail
+
+    assert with_zero_tail([Segment(1.0, vx=0.2)], 3.0) == [Segment(1.0, vx=0.2), Segment(2.0)]
+    assert with_zero_tail([Segment(1.0, vx=0.2)], 1.0) == [Segment(1.0, vx=0.2)]
+    assert with_zero_tail([Segment(1.0, vx=0.2)], None) == [Segment(1.0, vx=0.2)]
+    profile = tmp_path / "short.yaml"
+    profile.write_text("segments:\n  - {duration: 0.2, vx: 0.1}\n")
+    out = tmp_path / "out"
+    with caplog.at_level("INFO"):
+        assert main(["--profile", str(profile), "--duration", "0.4", "--out", str(out),
+                     "--no-gif"]) == 0
+    assert "runs 0.2 s past the profile's end: the command is zero then (segment 1" \
+        in caplog.text
+    segments = json.loads((out / "summary.json").read_text())["segments"]
+    assert [s["command"] for s in segments] == [{"vx": 0.1, "vy": 0.0, "wz": 0.0},
+                                                {"vx": 0.0, "vy": 0.0, "wz": 0.0}]
+    assert segments[1]["start"] == pytest.approx(0.2)
