@@ -641,6 +641,10 @@ def test_a_trajectory_cut_short_as_stale_is_warned_about(context):
         assert len(stale) == 1, logged
         assert "went stale 0.5 s after it came, 1.500 s before its last point" in stale[0]
         assert "raise trajectory_timeout" in stale[0]
+        strong = trajectory(sim, sim.now_ns)
+        strong.points[0].effort[0] = 5e6  # clipped to the limit: said
+        sim._on_trajectory(strong)
+        assert logged[-1].startswith("joint_trajectory: efforts beyond the effort limits")
         ahead = trajectory(sim, sim.now_ns + 800_000_000)  # 0.8 s ahead: never reached
         sim._on_trajectory(ahead)
         assert sim.rejected_trajectories == 1

@@ -430,3 +430,18 @@ def test_a_simulator_leaves_no_folder_behind(tmp_path, monkeypatch):
     finally:
         sim.close()
     assert not list(tmp_path.iterdir())
+
+
+def test_efforts_beyond_the_limits_are_said_to_be_clipped(go2):
+    """solo12's URDF limits (1000) let efforts of 5e6 throw it 18 m up, without a word (an
+    auditor's standalone use of sim_node); a plan's own torques say nothing."""
+    q = go2.q_start[7:][None, :]
+    assert go2.set_trajectory(JointTrajectoryCommand(
+        go2.joint_names, 0.0, np.array([0.0]), q, efforts=go2.tau_standing[None, :])) is None
+    efforts = go2.tau_standing[None, :].copy()
+    efforts[0, 2] = 5e6
+    note = go2.set_trajectory(JointTrajectoryCommand(go2.joint_names, 0.0, np.array([0.0]), q,
+                                                     efforts=efforts))
+    assert note.startswith("efforts beyond the effort limits are clipped to them: "
+                           f"{go2.joint_names[2]} 5e+06 (limit ")
+    assert "1 joint(s) over" in note

@@ -464,7 +464,9 @@ class SimNode(Node):
                                            if self._jitter_steps else 0)
                 start_ns = stamp_ns if stamp_ns else self.awaiting_stamp_ns
                 self.sim.step(max(0, (start_ns - self.now_ns) // self._dt_ns + d))
-            self.sim.set_trajectory(cmd)
+            note = self.sim.set_trajectory(cmd)
+            if note:
+                self._warn("effort", f"joint_trajectory: {note}")
         except ValueError as exc:
             self.rejected_trajectories += 1
             self._warn(problem_kind("trajectory", str(exc)),
