@@ -240,6 +240,8 @@ def test_cli_rejects_bad_settings_before_solving_in_one_line(capsys):
     ("walk", "mpc={gait: trot}", "'mpc.gait' must be a mapping"),  # a dict() error
     ("walk", "foo", "--set expects KEY=VALUE"),                     # exit code 1 before
     ("turn", "locked_joints=[foo]", "foo"),                         # a traceback before
+    ("leap", "locked_joints=[1]", "locked_joints must be a list of joint names"),  # TypeError
+    ("leap", "distance=[0.3", "--set 'distance=[0.3': not a YAML value"),  # 6 lines of YAML's
 ], ids=lambda x: x if isinstance(x, str) and "=" in x else None)
 def test_cli_rejects_settings_it_cannot_run_before_building(capsys, motion, setting, text):
     from horizon_mpc.motions.cli import main
@@ -247,6 +249,7 @@ def test_cli_rejects_settings_it_cannot_run_before_building(capsys, motion, sett
     assert main([motion, "--set", setting, "--no-animation"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("motion: error:") and text in err and "Traceback" not in err
+    assert err.count("\n") == 1, err
 
 
 def test_cli_refuses_an_out_path_that_is_a_file_before_solving(tmp_path, capsys):
@@ -908,3 +911,19 @@ def test_the_python_api_defaults_to_the_settings_the_cli_runs(monkeypatch):
     monkeypatch.setattr(walk_module, "motion_settings", short)
     res = walk_module.run_walk("go2")
     assert asked == [("walk", WalkSettings, "go2")] and res.n_nodes == 3
+
+
+@pytest.mark.slow  # the ILQR's leap functions compile once (~40 s), then ~5 s
+def test_an_unsolved_leap_the_simulator_refuses_to_replay_is_written_and_said(tmp_path, capsys):
+    """`leap --solver ilqr` (not solved, as documented) ended in a traceback from the replay
+    (a joint asked to move at 110 rad/s) with nothing written; its torques at 6x the URDF
+    limits went without a word (an auditor's)."""
+    from horizon_mpc.motions.cli import main
+
+    assert main(["leap", "--solver", "ilqr", "--no-animation", "--out", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "leap: NOT solved (ilqr status:" in out
+    assert "WARNING: not replayed in PyBullet: points " in out
+    assert "times the URDF effort limits" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert "per s, beyond 100" in summary["pybullet_replay"]["not_replayed"]

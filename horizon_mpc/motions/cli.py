@@ -61,7 +61,13 @@ def _overrides(items: Sequence[str]) -> dict:
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise ValueError(f"--set expects KEY=VALUE, got {item!r}")
-        out[key.strip()] = yaml.safe_load(value)
+        try:
+            out[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError as exc:  # six lines of PyYAML's, naming no item
+            mark = getattr(exc, "problem_mark", None)
+            where = f" at column {mark.column + 1}" if mark is not None else ""
+            raise ValueError(f"--set {item!r}: not a YAML value ({getattr(exc, 'problem', '')}"
+                             f"{where})") from None
     return out
 
 
@@ -149,8 +155,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: Sequence[str] | None) -> int:
     args = _parser().parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+    logging.basicConfig(level=logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if args.verbose:  # ours only: matplotlib's font search was 2343 of 2402 lines
+        logging.getLogger("horizon_mpc").setLevel(logging.DEBUG)
     from horizon_mpc.config import load_robot_config
     from horizon_mpc.motions import leap, turn, walk
     from horizon_mpc.motions.settings import load_motion_config
@@ -217,10 +225,16 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
     if args.motion == "leap" and not args.no_replay:
         from horizon_mpc.motions.replay import replay, replay_summary
 
-        rep = replay(res, cfg, model.pin_model, settings.replay_kp, settings.replay_kd)
-        extra["pybullet_replay"] = {
-            "kp": settings.replay_kp, "kd": settings.replay_kd,
-            **replay_summary(rep, res, float(res.summary["target"][0] - res.q[0, 0]))}
+        try:
+            rep = replay(res, cfg, model.pin_model, settings.replay_kp, settings.replay_kd)
+        except ValueError as exc:  # a plan the simulator refuses (an unsolved one: a joint
+            # jumping at 110 rad/s), which was a traceback with nothing written
+            extra["pybullet_replay"] = {"kp": settings.replay_kp, "kd": settings.replay_kd,
+                                        "not_replayed": str(exc)}
+        else:
+            extra["pybullet_replay"] = {
+                "kp": settings.replay_kp, "kd": settings.replay_kd,
+                **replay_summary(rep, res, float(res.summary["target"][0] - res.q[0, 0]))}
     render = {"yaw": 90.0} if args.motion == "leap" else {}
     _checkpoint()
     files = write_outputs(res, cfg, out, effort_limit=model.joint_effort_limit,
@@ -237,9 +251,17 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
     for key, value in res.summary.items():
         if not isinstance(value, list) or len(value) <= 4:
             print(f"  {key}: {value}")
+    ratio = res.summary.get("max_torque_ratio")
+    if isinstance(ratio, float) and ratio > 1.0 + TORQUE_RATIO_TOLERANCE:
+        print(f"  WARNING: the plan's torques reach {ratio:.3g} times the URDF effort limits "
+              f"(torque_limit_scale {getattr(settings, 'torque_limit_scale', None)}): more than "
+              "the robot's motors are rated for")
     if "pybullet_replay" in extra:
         print(f"  pybullet_replay: {extra['pybullet_replay']}")
-        if not ok:
+        if "not_replayed" in extra["pybullet_replay"]:
+            print(f"  WARNING: not replayed in PyBullet: "
+                  f"{extra['pybullet_replay']['not_replayed']}")
+        elif not ok:
             print("  (the replay is of a plan the solver did not solve: no guide to how a "
                   "solved leap lands)")
         elif not extra["pybullet_replay"]["within_tolerance"]:
@@ -247,6 +269,11 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
                   "this simulated robot follows without feedback (replay_kp/replay_kd, or a "
                   "shorter leap)")
     return 0 if ok else 1
+
+
+#: share beyond 1 of the largest torque / URDF effort limit that is said (a plan at its
+#: bounds reaches them within the solver's tolerance)
+TORQUE_RATIO_TOLERANCE = 1e-3
 
 
 def _replay_warning(rep: dict) -> str:

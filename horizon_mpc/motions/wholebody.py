@@ -207,8 +207,13 @@ def robot_model(cfg: RobotConfig, locked: Sequence[str] = ()) -> RobotModel:
     parents (Pinocchio's ``buildReducedModel``).
 
     Raises:
-        ValueError: a pattern that matches no joint (the message lists the joints).
+        ValueError: ``locked`` is not a list of names, or a pattern matches no joint (the
+            message lists the joints).
     """
+    if isinstance(locked, str) or not all(isinstance(p, str) for p in locked):
+        # (fnmatch on an int was a TypeError traceback out of the motion CLI)
+        raise ValueError(f"locked_joints must be a list of joint names or patterns, got "
+                         f"{list(locked) if not isinstance(locked, str) else locked!r}")
     full = RobotModel.from_config(cfg)
     if not locked:
         return full
