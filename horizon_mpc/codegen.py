@@ -337,6 +337,10 @@ class CompilerError(RuntimeError):
     """The C compiler ran and failed (:func:`build_shared_library`)."""
 
 
+#: why a build failed when the compiler exited 0 with no whole library
+BAD_OUTPUT = "the C compiler exited 0 without a whole library (truncated or not written)"
+
+
 def _uncompiled_reason(exc: OSError | CompilerError, folder: Path) -> str:
     """Why a build failed, the same for every function (the warning is said once per
     reason; a path named each function's random build folder): an OSError's folder and
@@ -356,6 +360,8 @@ def _uncompiled_reason(exc: OSError | CompilerError, folder: Path) -> str:
     if undefined:
         return (f"the C compiler failed: {undefined} (a function that calls a compiled "
                 "function: compile the uncompiled one instead)")
+    if lines and lines[-1] == BAD_OUTPUT:
+        return BAD_OUTPUT
     return f"the C compiler failed: {first('error') or (lines or [repr(exc)])[-1]}"
 
 
@@ -373,7 +379,7 @@ def _warn_uncompiled(reason: str) -> None:
         _UNCOMPILED_WARNED.add(reason)
         if "not found on PATH" in reason:
             advice = f"install a C compiler (CC={CC}), or "
-        elif reason.startswith("the C compiler failed"):
+        elif reason.startswith(("the C compiler failed", BAD_OUTPUT)):
             advice = ""
         else:
             advice = "set HORIZON_MPC_CACHE_DIR to a writable folder, or "
@@ -518,9 +524,9 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
         # a compiler that says it succeeded: its output checked before it is ever loaded (a
         # truncated one was a SIGBUS at every start, the cache's check seeing it only later)
         damage = "not written" if not tmp_lib.is_file() else _structure_damage(tmp_lib)
-        if damage:
-            raise CompilerError(f"compiling {what}: the compiler exited 0 and its library is "
-                                f"{damage} ({' '.join(cmd)})")
+        if damage:  # the last line the same for every function: one warning for them all
+            raise CompilerError(f"compiling {what} ({' '.join(cmd)}): its library is {damage}"
+                                f"\n{BAD_OUTPUT}")
         # the checksum first: a reader seeing a library sees its checksum or a newer one
         # (two processes building at once: a mismatch, one rebuild; never a damaged load)
         tmp_sum = work / checksum_path(lib).name

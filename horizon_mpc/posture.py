@@ -16,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from horizon_mpc.config import RobotConfig
+from horizon_mpc.model.loading import refuse_second_free_flyer
 from horizon_mpc.robots import example_robot_files, known_robots
 
 __all__ = ["config_urdf_path", "load_pin_model", "srdf_joint_values", "standing_configuration"]
@@ -36,7 +37,10 @@ def load_pin_model(cfg: RobotConfig, floating_base: bool = True) -> pin.Model:
     if not path.is_file():
         raise FileNotFoundError(f"URDF {str(path)!r} of robot config {cfg.name!r} does not exist")
     if floating_base:
-        return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+        model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+        # (the simulator's path: a URDF floating joint was 'base_link is not the root link')
+        refuse_second_free_flyer(model, True, f"URDF file {path}")
+        return model
     return pin.buildModelFromUrdf(str(path))
 
 

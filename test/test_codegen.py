@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -597,7 +598,7 @@ def test_a_relative_cache_folder_loads_its_libraries(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("tail, said", [('truncate -s 1000 "$out"', "truncated (1000 bytes"),
-                                        ('rm -f "$out"', "not written")])
+                                        ('rm -f "$out"', "is not written")])
 def test_a_compiler_output_that_is_not_a_whole_library_is_never_loaded(
         cache, monkeypatch, caplog, tail, said):
     """A compiler that exits 0 with a truncated library: loaded at once (SIGBUS at every
@@ -609,11 +610,20 @@ def test_a_compiler_output_that_is_not_a_whole_library_is_never_loaded(
     cc.chmod(0o755)
     monkeypatch.setattr(codegen, "CC_ARGV", (str(cc),))
     monkeypatch.setattr(codegen, "_UNCOMPILED_WARNED", set())
-    fn = _small_function()
+    x = cs.SX.sym("x")
+    fns = [_small_function(), cs.Function("other", [x], [2 * x])]
+    def source(work: Path) -> list[str]:
+        (work / "probe.c").write_text("int probe(void) { return 0; }\n")
+        return [*codegen._FLAGS, str(work / "probe.c")]
+
+    with pytest.raises(codegen.CompilerError, match=re.escape(said)):
+        codegen.build_shared_library(cache / _lib("probe"), source, "probe")
     with caplog.at_level("WARNING", logger="horizon_mpc.codegen"):
-        assert codegen.compile_function(fn) is fn  # uncompiled, the process alive
-    assert said in caplog.text and "running them uncompiled" in caplog.text
-    assert "HORIZON_MPC_CACHE_DIR" not in caplog.text
+        for fn in fns:
+            assert codegen.compile_function(fn) is fn  # uncompiled, the process alive
+    # one warning for all the functions, which does not blame the cache folder
+    assert caplog.text.count("running them uncompiled") == 1, caplog.text
+    assert codegen.BAD_OUTPUT in caplog.text and "HORIZON_MPC_CACHE_DIR" not in caplog.text
     assert not list(cache.glob("*.so"))
 
 

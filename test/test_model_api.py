@@ -100,8 +100,11 @@ def test_limits_written_as_zero_are_no_limit_and_said(caplog):
                                      "effort": []}
     assert np.isinf(velocity.joint_velocity_limit[0])
     assert np.all(np.isfinite(velocity.joint_velocity_limit[1:]))
-    ranges = RobotModel.from_urdf(_go2_urdf_with("upper", "0",
-                                                 text=_go2_urdf_with("lower", "0")))
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="horizon_mpc.model.robot_model"):
+        ranges = RobotModel.from_urdf(_go2_urdf_with("upper", "0",
+                                                     text=_go2_urdf_with("lower", "0")))
+    assert not caplog.text  # [0, 0]: the URDF's default range, said at INFO (CENTAURO)
     assert ranges.unset_limits["position"] == GO2_JOINTS
     assert np.all(np.isinf(ranges.q_lower)) and np.all(np.isinf(ranges.q_upper))
     caplog.clear()
@@ -111,7 +114,7 @@ def test_limits_written_as_zero_are_no_limit_and_said(caplog):
     assert not caplog.text
 
 
-def test_a_urdf_floating_joint_under_a_free_flyer_is_refused():
+def test_a_urdf_floating_joint_under_a_free_flyer_is_refused(tmp_path):
     """An auditor's go2 URDF with world -> base as a 'floating' joint: the model had two
     free-flyers, was warned about as fixed to the world, then refused as having continuous
     joints []."""
@@ -123,6 +126,16 @@ def test_a_urdf_floating_joint_under_a_free_flyer_is_refused():
                                          "remove the floating joint"):
         RobotModel.from_urdf(text)
     assert RobotModel.from_urdf(text, floating_base=False).nq == 19
+    # the simulator's and the posture's model too (it said 'base_link is not the root')
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.posture import standing_configuration
+
+    path = tmp_path / "go2_floating.urdf"
+    path.write_text(text)
+    (tmp_path / "mine.yaml").write_text(f"robot: go2\nurdf_path: {path}\n"
+                                        "feet: [FL_foot, FR_foot, RL_foot, RR_foot]\n")
+    with pytest.raises(ValueError, match="are 'floating' joints"):
+        standing_configuration(load_robot_config(str(tmp_path / "mine.yaml")))
 
 
 def test_continuous_joints_take_cos_sin_and_are_unbounded():

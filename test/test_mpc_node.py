@@ -1899,17 +1899,20 @@ def test_a_node_waiting_for_its_states_says_so_on_diagnostics(context, walking_m
 def test_a_remapped_input_is_named_with_its_topic(context, walking_mpc):
     """-r joint_states:=/foo: the node still said it waited for 'joint_states' (an
     auditor, as a ROS user)."""
-    walking_mpc.t_last = None
-    node = MpcNode(parameter_overrides=[Parameter("trigger", value="state")], mpc=walking_mpc,
-                   context=context, cli_args=["--ros-args", "-r", "joint_states:=/foo"])
-    node._pub_diag = Sent()
-    try:
-        node._check_progress()
-        status = node._pub_diag.msgs[-1].status[0]
-        assert status.message == ("waiting for joint_states (remapped to /foo) and odom: "
-                                  "not planning")
-    finally:
-        node.destroy_node()
+    for args, said in ((["-r", "joint_states:=/foo"], "joint_states (remapped to /foo)"),
+                       (["-r", "joint_states:=/robot2/joint_states"],
+                        "joint_states (remapped to /robot2/joint_states)"),
+                       (["-r", "__ns:=/robot1"], "joint_states")):  # its own namespace
+        walking_mpc.t_last = None
+        node = MpcNode(parameter_overrides=[Parameter("trigger", value="state")],
+                       mpc=walking_mpc, context=context, cli_args=["--ros-args", *args])
+        node._pub_diag = Sent()
+        try:
+            node._check_progress()
+            status = node._pub_diag.msgs[-1].status[0]
+            assert status.message == f"waiting for {said} and odom: not planning", args
+        finally:
+            node.destroy_node()
 
 
 def test_use_sim_time_outside_ros_args_is_no_parameter(walking_mpc):

@@ -13,7 +13,7 @@ import pinocchio as pin
 
 from horizon_mpc.c_output import Captured, c_output_captured
 
-__all__ = ["load_pin_model"]
+__all__ = ["load_pin_model", "refuse_second_free_flyer"]
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,7 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
         except (ValueError, RuntimeError) as exc:
             error = exc
     if model is not None:
-        _refuse_second_free_flyer(model, floating_base, source)
+        refuse_second_free_flyer(model, floating_base, source)
         _check_root(model, floating_base, source)
         _warn_mimic_joints(urdf if is_xml else path.read_text(errors="replace"), source)
         return model
@@ -96,7 +96,7 @@ def _warn_mimic_joints(text: str, source: str) -> None:
                     ", ".join(f"{j} mimics {m}" for j, m in pairs))
 
 
-def _refuse_second_free_flyer(model: pin.Model, floating_base: bool, source: str) -> None:
+def refuse_second_free_flyer(model: pin.Model, floating_base: bool, source: str) -> None:
     """ValueError for a URDF ``floating`` joint when ``floating_base`` adds the free-flyer:
     the model had two (a base above a 'world' link, warned about as a robot fixed to the
     world, then refused as having continuous joints)."""
@@ -108,7 +108,7 @@ def _refuse_second_free_flyer(model: pin.Model, floating_base: bool, source: str
         raise ValueError(f"{source}: joint(s) {floating} are 'floating' joints, and "
                          "floating_base=True adds the free-flyer above the root link itself: "
                          "remove the floating joint and the link above it (e.g. 'world') "
-                         "from the URDF, or pass floating_base=False")
+                         "from the URDF (RobotModel.from_urdf: or pass floating_base=False)")
 
 
 def _check_root(model: pin.Model, floating_base: bool, source: str) -> None:

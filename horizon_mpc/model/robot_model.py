@@ -141,12 +141,15 @@ class RobotModel(SymbolicFunctions):
         wheels). Bounds of zero made the walking problem infeasible (a go2 URDF with
         ``effort="0"`` fell in 0.4 s) or froze the robot (``lower = upper = 0``: it stood
         still, no word). Returns ``{"position" | "velocity" | "effort": [joint names]}``
-        of the limits so read, warned about once here."""
+        of the limits so read, logged once here: at INFO for ranges of [0, 0] only (the
+        URDF's own default, a shipped robot's wheels), else a warning."""
         unset: dict[str, list[str]] = {"position": [], "velocity": [], "effort": []}
+        inverted = False  # lower > upper: a URDF's mistake rather than its default
         for s in actuated:
             iq, iv = slice(s.idx_q, s.idx_q + s.nq), slice(s.idx_v, s.idx_v + s.nv)
             if np.any(self.q_lower[iq] >= self.q_upper[iq]):
                 unset["position"].append(s.name)
+                inverted |= bool(np.any(self.q_lower[iq] > self.q_upper[iq]))
                 self.q_lower[iq], self.q_upper[iq] = -np.inf, np.inf
             for kind, limit in (("velocity", self.v_limit), ("effort", self.effort_limit)):
                 if np.any(limit[iv] <= 0.0):
@@ -154,8 +157,10 @@ class RobotModel(SymbolicFunctions):
                     limit[iv] = np.inf
         said = [f"{kind} ({_listed(names)})" for kind, names in unset.items() if names]
         if said:
-            log.warning("%s: URDF limits of zero (or lower >= upper) taken as no limit: %s",
-                        self.name, "; ".join(said))
+            level = (logging.WARNING if inverted or unset["velocity"] or unset["effort"]
+                     else logging.INFO)
+            log.log(level, "%s: URDF limits of zero (or lower >= upper) taken as no limit: %s",
+                    self.name, "; ".join(said))
         return unset
 
     # ------------------------------------------------------------------ construction

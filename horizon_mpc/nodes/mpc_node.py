@@ -310,7 +310,8 @@ class MpcNode(MpcParameters, Node):
         """An input's name for the log: ``name``, with the topic it was remapped to
         (``-r joint_states:=/foo``: the node said it waited for joint_states)."""
         topic = self._input_topics[name]
-        return name if topic.rsplit("/", 1)[-1] == name else f"{name} (remapped to {topic})"
+        unmapped = self.resolve_topic_name(name, only_expand=True)  # in the node's namespace
+        return name if topic == unmapped else f"{name} (remapped to {topic})"
 
     def _default_to_sim_time(self) -> None:
         """``use_sim_time`` true unless it was set for this node (a ``-p``, a params-file

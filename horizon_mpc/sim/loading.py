@@ -10,9 +10,10 @@ Three things differ between pybullet's URDF importer and Pinocchio's, and are co
   make pybullet treat the robot as fixed-base.)
 * Inertia: taken from the file (``URDF_USE_INERTIA_FROM_FILE``), not recomputed from the
   collision shapes; pybullet's default per-link linear/angular velocity damping is removed.
-* An empty position range (``lower >= upper``, e.g. ``lower="0" upper="0"``): pybullet locks
+* An empty position range (``lower == upper``, e.g. ``lower="0" upper="0"``): pybullet locks
   the joint there (a go2 URDF written so stood up on straight legs); here, as for the model
-  (:attr:`horizon_mpc.model.RobotModel.unset_limits`), it is no limit.
+  (:attr:`horizon_mpc.model.RobotModel.unset_limits`), it is no limit (``lower > upper`` is
+  none in pybullet already).
 
 Joint damping from ``<dynamics damping>`` is applied by pybullet itself; joint friction is
 realised with pybullet's joint velocity motor (target velocity 0, max force = friction), which
@@ -305,7 +306,7 @@ def load_robot(
     for j in joint_index.values():
         info = p.getJointInfo(body, j, physicsClientId=client)
         friction, lower, upper = info[7], info[8], info[9]
-        if lower >= upper and info[2] in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
+        if lower == upper and info[2] in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
             # changeDynamics cannot remove the limit: a range no motion reaches replaces it
             p.changeDynamics(body, j, jointLowerLimit=-_NO_LIMIT, jointUpperLimit=_NO_LIMIT,
                              physicsClientId=client)
