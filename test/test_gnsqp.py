@@ -303,22 +303,7 @@ def test_qrqp_gives_up_a_qp_early_and_retries_it_cold(monkeypatch):
     iterations, and no elastic step is left (3 before, 2.2 s of QPs against 0.4)."""
     from horizon_mpc.solvers import gnsqp
 
-    plain: list[tuple[int, bool, bool]] = []  # iterations, success, warm-started
-    original = gnsqp.GnSqpSolver._qp_solver
-
-    def counted(self, elastic=False, warm=False):
-        qp = original(self, elastic, warm)
-        if elastic:
-            return qp
-
-        def call(**kw):
-            out = qp(**kw)
-            plain.append((qp.stats()["iter_count"], qp.stats()["success"], "lam_a0" in kw))
-            return out
-        call.stats = qp.stats
-        return call
-
-    monkeypatch.setattr(gnsqp.GnSqpSolver, "_qp_solver", counted)
+    plain = _counted_plain_qps(monkeypatch)
     prb = _unicycle_around_obstacles()
     solver = make_solver("gnsqp", prb)
     assert solver.solve(), solver.stats.status
@@ -378,7 +363,20 @@ def test_a_warm_started_qp_stops_at_its_own_cap_and_is_solved_cold(monkeypatch):
     from horizon_mpc.solvers import gnsqp
 
     monkeypatch.setattr(gnsqp, "QRQP_WARM_ITER", 2)
-    calls: list[tuple[bool, int, bool]] = []  # warm, iterations, success
+    calls = _counted_plain_qps(monkeypatch)
+    solver = make_solver("gnsqp", _unicycle_around_obstacles())
+    assert solver.solve(), solver.stats.status
+    stopped = [k for k, (it, ok, warm) in enumerate(calls) if warm and not ok]
+    assert stopped and all(calls[k][0] == 2 for k in stopped)
+    assert all(calls[k + 1][1] and not calls[k + 1][2] for k in stopped)  # cold, solved
+    assert max(it for it, _, warm in calls if warm) <= 2
+
+
+def _counted_plain_qps(monkeypatch) -> list[tuple[int, bool, bool]]:
+    """(iterations, success, warm-started) of every plain QP the GN-SQP solves from now."""
+    from horizon_mpc.solvers import gnsqp
+
+    calls: list[tuple[int, bool, bool]] = []
     original = gnsqp.GnSqpSolver._qp_solver
 
     def counted(self, elastic=False, warm=False):
@@ -388,15 +386,10 @@ def test_a_warm_started_qp_stops_at_its_own_cap_and_is_solved_cold(monkeypatch):
 
         def call(**kw):
             out = qp(**kw)
-            calls.append((warm, qp.stats()["iter_count"], qp.stats()["success"]))
+            calls.append((qp.stats()["iter_count"], qp.stats()["success"], warm))
             return out
         call.stats = qp.stats
         return call
 
     monkeypatch.setattr(gnsqp.GnSqpSolver, "_qp_solver", counted)
-    solver = make_solver("gnsqp", _unicycle_around_obstacles())
-    assert solver.solve(), solver.stats.status
-    stopped = [k for k, (warm, it, ok) in enumerate(calls) if warm and not ok]
-    assert stopped and all(calls[k][1] == 2 for k in stopped)
-    assert all(not calls[k + 1][0] and calls[k + 1][2] for k in stopped)  # cold, solved
-    assert max(it for warm, it, _ in calls if warm) <= 2
+    return calls
