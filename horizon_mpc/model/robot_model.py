@@ -78,7 +78,7 @@ class RobotModel(SymbolicFunctions):
         v_limit, effort_limit: (nv,) velocity / effort limits (inf where unbounded).
         unset_limits: ``{"position" | "velocity" | "effort": [joint names]}``: the URDF's
             limits of zero (a range with lower >= upper), read as no limit (inf) and
-            warned about.
+            logged.
         joint_position_lower, joint_position_upper, joint_velocity_limit, joint_effort_limit:
             the same limits per actuated joint, ``(len(joint_names),)``.
         joint_idx_q, joint_idx_v: joint name -> first index in q / v.

@@ -276,7 +276,7 @@ class ReferenceGenerator:
             return self._hold
         if t - self._received > self.timeout:  # stale: freeze where the reference was
             q, _, tau = self._interpolate(times, min(self._received + self.timeout, times[-1]))
-            if times[-1] > self._received + self.timeout:
+            if times[-1] > self._received + self.timeout + STAMP_RESOLUTION:  # not its noise
                 self.stale_cuts += 1
                 self.last_cut = (self.timeout, float(times[-1] - self._received))
             self.hold(q, tau)
