@@ -39,7 +39,7 @@ def load_pin_model(cfg: RobotConfig, floating_base: bool = True) -> pin.Model:
     if floating_base:
         model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
         # (the simulator's path: a URDF floating joint was 'base_link is not the root link')
-        refuse_second_free_flyer(model, True, f"URDF file {path}")
+        refuse_second_free_flyer(model, f"URDF file {path}")
         return model
     return pin.buildModelFromUrdf(str(path))
 

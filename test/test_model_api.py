@@ -114,19 +114,21 @@ def test_limits_written_as_zero_are_no_limit_and_said(caplog):
     assert not caplog.text
 
 
-def test_a_urdf_floating_joint_under_a_free_flyer_is_refused(tmp_path):
-    """An auditor's go2 URDF with world -> base as a 'floating' joint: the model had two
-    free-flyers, was warned about as fixed to the world, then refused as having continuous
-    joints []."""
+def test_a_urdf_floating_joint_under_the_free_flyer_is_said_and_refused_for_a_robot(
+        tmp_path, caplog):
+    """An auditor's go2 URDF with world -> base as a 'floating' joint: warned about as a
+    robot fixed to the world (advice: floating_base=False), then refused as having
+    continuous joints [] or a base_link that is not the root. The model (two free-flyers)
+    is valid and says what it is; a robot config's model refuses it by name."""
     text = example_robot_files("go2").urdf.read_text()
     at = text.index("<link")
     text = (text[:at] + '<link name="world"/><joint name="floating_base" type="floating">'
             '<parent link="world"/><child link="base"/></joint>' + text[at:])
-    with pytest.raises(ValueError, match=r"\['floating_base'\] are 'floating' joints.*"
-                                         "remove the floating joint"):
-        RobotModel.from_urdf(text)
+    with caplog.at_level("WARNING", logger="horizon_mpc.model.loading"):
+        assert RobotModel.from_urdf(text).nq == 26
+    assert "['floating_base'] are 'floating' joints below the free-flyer" in caplog.text
+    assert "fixed to the world" not in caplog.text
     assert RobotModel.from_urdf(text, floating_base=False).nq == 19
-    # the simulator's and the posture's model too (it said 'base_link is not the root')
     from horizon_mpc.config import load_robot_config
     from horizon_mpc.posture import standing_configuration
 
@@ -134,7 +136,8 @@ def test_a_urdf_floating_joint_under_a_free_flyer_is_refused(tmp_path):
     path.write_text(text)
     (tmp_path / "mine.yaml").write_text(f"robot: go2\nurdf_path: {path}\n"
                                         "feet: [FL_foot, FR_foot, RL_foot, RR_foot]\n")
-    with pytest.raises(ValueError, match="are 'floating' joints"):
+    with pytest.raises(ValueError, match=r"\['floating_base'\] are 'floating' joints.*remove "
+                                         "the floating joint"):
         standing_configuration(load_robot_config(str(tmp_path / "mine.yaml")))
 
 

@@ -13,7 +13,7 @@ import pinocchio as pin
 
 from horizon_mpc.c_output import Captured, c_output_captured
 
-__all__ = ["load_pin_model", "refuse_second_free_flyer"]
+__all__ = ["floating_joints", "load_pin_model", "refuse_second_free_flyer"]
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,6 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
         except (ValueError, RuntimeError) as exc:
             error = exc
     if model is not None:
-        refuse_second_free_flyer(model, floating_base, source)
         _check_root(model, floating_base, source)
         _warn_mimic_joints(urdf if is_xml else path.read_text(errors="replace"), source)
         return model
@@ -96,19 +95,23 @@ def _warn_mimic_joints(text: str, source: str) -> None:
                     ", ".join(f"{j} mimics {m}" for j, m in pairs))
 
 
-def refuse_second_free_flyer(model: pin.Model, floating_base: bool, source: str) -> None:
-    """ValueError for a URDF ``floating`` joint when ``floating_base`` adds the free-flyer:
-    the model had two (a base above a 'world' link, warned about as a robot fixed to the
-    world, then refused as having continuous joints)."""
-    if not floating_base:
-        return
-    floating = [model.names[j] for j in range(2, model.njoints)
-                if model.joints[j].shortname() == "JointModelFreeFlyer"]
+def floating_joints(model: pin.Model, floating_base: bool = True) -> list[str]:
+    """The URDF's own ``floating`` joints of ``model`` (free-flyers below the root one that
+    ``floating_base`` added)."""
+    first = 2 if floating_base else 1
+    return [model.names[j] for j in range(first, model.njoints)
+            if model.joints[j].shortname() == "JointModelFreeFlyer"]
+
+
+def refuse_second_free_flyer(model: pin.Model, source: str) -> None:
+    """ValueError for a URDF ``floating`` joint below the free-flyer of a legged robot's
+    model (a config's: a base above a 'world' link was refused as 'base_link is not the root
+    link', or as having continuous joints [])."""
+    floating = floating_joints(model)
     if floating:
-        raise ValueError(f"{source}: joint(s) {floating} are 'floating' joints, and "
-                         "floating_base=True adds the free-flyer above the root link itself: "
-                         "remove the floating joint and the link above it (e.g. 'world') "
-                         "from the URDF (RobotModel.from_urdf: or pass floating_base=False)")
+        raise ValueError(f"{source}: joint(s) {floating} are 'floating' joints, and a legged "
+                         "robot's model adds its free-flyer above the root link itself: remove "
+                         "the floating joint and the link above it (e.g. 'world') from the URDF")
 
 
 def _check_root(model: pin.Model, floating_base: bool, source: str) -> None:
@@ -116,7 +119,13 @@ def _check_root(model: pin.Model, floating_base: bool, source: str) -> None:
     convention that URDF describes a robot fixed to the world (an arm), and the model
     gets 7 configuration and 6 velocity entries it should not have."""
     root = next((f.name for f in model.frames if f.type == pin.FrameType.BODY), None)
-    if floating_base and root == "world":
+    floating = floating_joints(model) if floating_base else []
+    if floating:  # (a valid model, two free-flyers: said so, not 'fixed to the world')
+        log.warning("%s: joint(s) %s are 'floating' joints below the free-flyer "
+                    "floating_base=True adds (nq %d, nv %d): for a legged robot remove them "
+                    "and the link above them from the URDF, or pass floating_base=False to keep "
+                    "the URDF's own", source, floating, model.nq, model.nv)
+    elif floating_base and root == "world":
         log.warning("%s: the root link is 'world' (a robot fixed to the world) and "
                     "floating_base=True adds a free-flyer joint above it (nq %d, nv %d); "
                     "pass floating_base=False for a fixed base", source, model.nq, model.nv)

@@ -35,6 +35,7 @@ from trajectory_msgs.msg import JointTrajectory
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.model import RobotModel
+from horizon_mpc.model.loading import refuse_second_free_flyer
 from horizon_mpc.mpc.controller import Plan, WalkingMpc
 from horizon_mpc.nodes.conversions import NS_PER_S, time_to_ns
 from horizon_mpc.nodes.declare import accept_integers_for_floats, parameter_overrides
@@ -903,6 +904,7 @@ def _check_joints(model: RobotModel) -> None:
         raise ValueError(f"robot {model.name!r} has a fixed base: the walking MPC needs a "
                          "legged robot on a floating base")
     pin_model = model.pin_model
+    refuse_second_free_flyer(pin_model, f"robot {model.name!r}")
     continuous = [pin_model.names[j] for j in range(2, pin_model.njoints)
                   if pin_model.joints[j].nq == 2 and pin_model.joints[j].nv == 1]
     if continuous or model.nq != 7 + len(model.joint_names):
