@@ -171,7 +171,6 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
     segments = list(segments or load_profile(DEFAULT_PROFILE))
     if duration is None:
         duration = sum(s.duration for s in segments)
-    segments = with_zero_tail(segments, duration)
     if mode not in ("lockstep", "realtime"):
         raise ValueError(f"mode must be 'lockstep' or 'realtime', got {mode!r}")
     cfg = load_robot_config(robot)  # an unknown robot fails here, before any node or process

@@ -35,7 +35,7 @@ import numpy as np
 import yaml
 
 __all__ = ["RobotConfig", "SimGains", "check_settings", "config_dirs", "field_default",
-           "find_config_file", "load_robot_config", "read_yaml"]
+           "find_config_file", "load_robot_config", "nearest_name", "read_yaml"]
 
 log = logging.getLogger(__name__)
 
@@ -261,6 +261,12 @@ def _edits(a: str, b: str) -> int:
     return d[len(a)][len(b)]
 
 
+def nearest_name(name: str, known: list[str]) -> str | None:
+    """The first of ``known`` within a few edits of ``name`` (a typo of it: at most a
+    quarter of its letters, at least one), else None."""
+    return next((n for n in known if _edits(name, n) <= max(1, len(n) // 4)), None)
+
+
 def _urdf_path(path: Path, value: Any) -> str | None:
     """``urdf_path`` of the config at ``path``: ``~`` expanded, a relative path taken from
     the config file's folder (it was from the working folder: a config worked from one
@@ -278,8 +284,7 @@ def _check_top_level_keys(path: Path, data: dict) -> None:
     word), else ignored with a warning (a user's own note, ``description:``)."""
     known = sorted(_KNOWN | set(SECTIONS))
     unknown = sorted(str(k) for k in data if k not in _KNOWN and k not in SECTIONS)
-    typos = {k: near[0] for k in unknown
-             if (near := [n for n in known if _edits(k, n) <= max(1, len(n) // 4)])}
+    typos = {k: near for k in unknown if (near := nearest_name(k, known))}
     if typos:
         hints = ", ".join(f"{k!r} (did you mean {v!r}?)" for k, v in typos.items())
         raise ValueError(f"{path}: unknown key(s) {hints}; known: {known}")

@@ -7,7 +7,6 @@ Only numeric Pinocchio is used here (no CasADi), so the simulator can use it too
 
 from __future__ import annotations
 
-import difflib
 import logging
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -15,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from horizon_mpc.config import RobotConfig
+from horizon_mpc.config import RobotConfig, nearest_name
 from horizon_mpc.model.loading import refuse_second_free_flyer
 from horizon_mpc.robots import example_robot_files, known_robots
 
@@ -121,8 +120,8 @@ def standing_configuration(
                or model.getJointId(name) < 2]
     if unknown:
         known = [model.names[j] for j in range(2, model.njoints)]
-        hints = {name: difflib.get_close_matches(name, known, n=1) for name in unknown}
-        said = ", ".join(f"{name!r}" + (f" (did you mean {hint[0]!r}?)" if hint else "")
+        hints = {name: nearest_name(name, known) for name in unknown}
+        said = ", ".join(f"{name!r}" + (f" (did you mean {hint!r}?)" if hint else "")
                          for name, hint in hints.items())
         raise ValueError(f"config {cfg.name!r}: nominal_joints names joints the model does not "
                          f"have: {said}; its joints are {known}")

@@ -245,8 +245,7 @@ class SimNode(Node):
         # lockstep bookkeeping: the stamp (ns) of the state awaiting an answer
         self.awaiting_stamp_ns: int | None = None
         self._started = not self.lockstep
-        self._deadline = (time.monotonic() + max(self.lockstep_timeout, START_WAIT)
-                          if self.lockstep_timeout > 0 else math.inf)
+        self._deadline = self._wall_deadline(START_WAIT)
         self._controller_seen: float | None = None  # wall time, see peers_ready
         # free-running pacing anchors (wall ns, sim ns)
         self._anchor: tuple[int, int] | None = None
@@ -348,8 +347,11 @@ class SimNode(Node):
             self._deadline = self._wall_deadline()
         return stamp_ns
 
-    def _wall_deadline(self) -> float:
-        return time.monotonic() + self.lockstep_timeout if self.lockstep_timeout > 0 else math.inf
+    def _wall_deadline(self, at_least: float = 0.0) -> float:
+        """lockstep_timeout (or ``at_least`` s, if longer) from now; never with 0."""
+        if self.lockstep_timeout <= 0:
+            return math.inf
+        return time.monotonic() + max(self.lockstep_timeout, at_least)
 
     def _warn(self, kind: str, text: str) -> None:
         """A warning throttled per ``kind``; says how many were suppressed meanwhile."""

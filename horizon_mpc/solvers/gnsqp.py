@@ -141,7 +141,7 @@ class GnSqpSolver(NlpSolver):
             ["w", "p", "reg", "lam_g", "lam_x"], ["H", "grad", "f", "g", "J_g", "stat"])
         self._evaluate = cs.Function("gn_evaluate", [w, P], [f, g], ["w", "p"], ["f", "g"])
         self._H_sp, self._A_sp = H.sparsity(), J_g.sparsity()
-        self._qp: dict[bool, cs.Function] = {}
+        self._qp: dict[bool | str, cs.Function] = {}  # plain, elastic (True), "warm"
         self._build_qp()
 
     def _check_problem(self, prb: Problem) -> None:
