@@ -1915,6 +1915,39 @@ def test_a_remapped_input_is_named_with_its_topic(context, walking_mpc):
             node.destroy_node()
 
 
+def test_a_remapped_input_is_named_in_its_rejections(context, walking_mpc):
+    """A rejected message of a remapped input named the input only ("rejected
+    joint_states"), not the topic it came on."""
+    walking_mpc.t_last = None
+    node = MpcNode(parameter_overrides=[Parameter("trigger", value="state")],
+                   mpc=walking_mpc, context=context,
+                   cli_args=["--ros-args", "-r", "joint_states:=/a/js", "-r", "odom:=/a/odom",
+                             "-r", "cmd_vel:=/a/cmd"])
+    logged: list[str] = []
+
+    class Logger:
+        def warning(self, text: str) -> None:
+            logged.append(text)
+
+    node.get_logger = Logger
+    try:
+        stamp = time_from_ns(10 * NS_PER_S)
+        names = list(node.joint_names)
+        node._on_joint_state(joint_state_to_msg(stamp, names[:-1], np.zeros(len(names) - 1),
+                                                np.zeros(len(names) - 1)))
+        odom = Odometry()
+        odom.pose.pose.position.x = math.nan
+        node._on_odom(odom)
+        twist = Twist()
+        twist.linear.x = math.inf
+        node._on_cmd_vel(twist)
+        assert [text.split(":")[0] for text in logged] == [
+            "rejected joint_states (remapped to /a/js)", "rejected odom (remapped to /a/odom)",
+            "rejected cmd_vel (remapped to /a/cmd)"], logged
+    finally:
+        node.destroy_node()
+
+
 def test_use_sim_time_outside_ros_args_is_no_parameter(walking_mpc):
     """'-p use_sim_time:=false' before --ros-args is ignored by rcl (warned about as a plain
     argument) and must not switch the sim-time default off either."""

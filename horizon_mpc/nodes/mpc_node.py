@@ -388,9 +388,9 @@ class MpcNode(MpcParameters, Node):
         if self._states_in == prev_states and self.plan is not None:
             # no state for a whole watch period, on the wall clock: with a simulator that
             # stopped, the sim clock stopped too and no timer tick can see the states age
-            self._skip_stale(math.inf, "stale", f"no joint_states / odom for "
-                             f"{_WATCH_PERIOD:g} s (wall clock): not planning; the last "
-                             "trajectory sent is the robot's last plan",
+            self._skip_stale(math.inf, "stale", f"no {self._input('joint_states')} / "
+                             f"{self._input('odom')} for {_WATCH_PERIOD:g} s (wall clock): not "
+                             "planning; the last trajectory sent is the robot's last plan",
                              self._last_tick_stamp or 0, clock_ns, force=True)
             return
         if self._states_in == prev_states or ticks > prev_ticks:
@@ -446,7 +446,7 @@ class MpcNode(MpcParameters, Node):
             if self._cmd is not None and not self._cmd_timed_out:
                 rejected = (f" ({self._cmd_rejected} rejected since)" if self._cmd_rejected
                             else "")
-                self._warn("cmd_timeout", f"no valid cmd_vel for more than "
+                self._warn("cmd_timeout", f"no valid {self._input('cmd_vel')} for more than "
                            f"{self.cmd_timeout:g} s{rejected}; commanding zero velocity")
             self._cmd_timed_out = True
             return np.zeros(3)
@@ -459,7 +459,8 @@ class MpcNode(MpcParameters, Node):
             qj, vj, notes = joints_from_joint_state(msg, self.joint_names, self._joint_limits)
         except ValueError as exc:
             self.rejected["joint_states"] += 1
-            self._warn(problem_kind("joint_states", str(exc)), f"rejected joint_states: {exc}")
+            self._warn(problem_kind("joint_states", str(exc)),
+                       f"rejected {self._input('joint_states')}: {exc}")
             return
         for note in notes:
             self._note("joint_states", note)
@@ -472,7 +473,7 @@ class MpcNode(MpcParameters, Node):
             pos, quat, lin, ang, notes = base_from_odometry(msg)
         except ValueError as exc:
             self.rejected["odom"] += 1
-            self._warn(problem_kind("odom", str(exc)), f"rejected odom: {exc}")
+            self._warn(problem_kind("odom", str(exc)), f"rejected {self._input('odom')}: {exc}")
             return
         for note in notes:
             self._note("odom", note)
@@ -496,7 +497,8 @@ class MpcNode(MpcParameters, Node):
             self.rejected["cmd_vel"] += 1
             self._cmd_rejected += 1
             self._warn(problem_kind("cmd_vel", str(exc)),
-                       f"rejected cmd_vel: {exc}; the last valid one stands until "
+                       f"rejected {self._input('cmd_vel')}: {exc}; the last valid one "
+                       "stands until "
                        f"cmd_timeout ({self.cmd_timeout:g} s) after it came, then zero")
             return
         if self.mpc.scheduler.gait.stands and np.any(cmd != 0.0):
