@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -320,6 +321,46 @@ def test_cli_interrupted_while_solving_exits_130_in_one_line(tmp_path, sig):
         assert proc.returncode == 130, err[-2000:]
         assert "motion: interrupted" in err and "Traceback" not in err, err[-2000:]
         assert "solved" not in out and not (tmp_path / "out").exists()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+_LONG_C_CALL = """
+import hashlib, sys
+from horizon_mpc.motions import cli, leap
+
+def stuck(*args, **kwargs):  # a C call that never returns to Python (as nlpsol's build)
+    hashlib.pbkdf2_hmac("sha256", b"x", b"y", 2 ** 31 - 1)
+
+leap.run_leap = stuck
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def test_cli_interrupted_inside_a_long_c_call_ends_after_a_grace_period(tmp_path):
+    """SIGTERM while CasADi built IPOPT's derivatives of a go2 turn (a minute in C, where
+    Python runs no signal handler): the turn ended 69 s later. Now FORCE_EXIT_AFTER s, with
+    the one line, exit code 130 and no output folder left."""
+    from horizon_mpc.motions.cli import FORCE_EXIT_AFTER
+
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    proc = subprocess.Popen(
+        [sys.executable, "-u", "-c", _LONG_C_CALL, "leap", "--no-animation", "--no-replay",
+         "--out", str(tmp_path / "out" / "leap")], cwd=tmp_path, env=env,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        header = proc.stdout.readline()
+        assert header.startswith("leap: "), header
+        time.sleep(0.5)  # inside the call
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+        waited = time.monotonic() - t0
+        assert proc.returncode == 130, err[-2000:]
+        assert FORCE_EXIT_AFTER <= waited < FORCE_EXIT_AFTER + 20, waited
+        assert "motion: interrupted inside a long solver call" in err, err[-2000:]
+        assert "Traceback" not in err and not (tmp_path / "out").exists()
     finally:
         if proc.poll() is None:
             proc.kill()

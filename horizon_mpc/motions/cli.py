@@ -14,7 +14,9 @@ import _thread
 import argparse
 import dataclasses
 import logging
+import os
 import signal
+import socket
 import sys
 import tempfile
 import threading
@@ -126,6 +128,59 @@ def _checkpoint() -> None:
         raise KeyboardInterrupt
 
 
+#: s a run has, after SIGINT/SIGTERM, to end by itself before the process ends at once
+FORCE_EXIT_AFTER = 3.0
+_INTERRUPT_MESSAGE = "motion: interrupted (the outputs are not written, or not all of them)"
+
+
+class _SignalWatch:
+    """Ends the process :data:`FORCE_EXIT_AFTER` s after a SIGINT/SIGTERM the run has not
+    ended by itself in. Python runs a signal's handler (the KeyboardInterrupt) only between
+    bytecodes, and a long CasADi call never gets there: building IPOPT's derivatives for a
+    go2 turn is a minute in C, and the turn ended 69 s after SIGTERM. The interpreter's
+    C-level handler writes each signal number to a socket at once (``signal.set_wakeup_fd``),
+    which a thread of this class reads; ``cleanup`` callables run before the exit (the
+    empty output folders' removal). Main thread only."""
+
+    def __init__(self) -> None:
+        self.cleanup: list[Callable[[], None]] = []
+        self._done = threading.Event()
+        self._read, self._write = socket.socketpair()
+        self._write.setblocking(False)
+        self._previous = signal.set_wakeup_fd(self._write.fileno(), warn_on_full_buffer=False)
+        threading.Thread(target=self._watch, name="motion-signals", daemon=True).start()
+
+    def _watch(self) -> None:
+        while True:
+            try:
+                got = self._read.recv(1)
+            except OSError:
+                return
+            if not got or self._done.is_set():
+                return  # closed: the run is over
+            if got[0] in (signal.SIGINT, signal.SIGTERM):
+                break
+        if self._done.wait(FORCE_EXIT_AFTER):
+            return
+        for clean in self.cleanup:
+            try:
+                clean()
+            except Exception:  # noqa: BLE001 - exiting anyway
+                pass
+        sys.stderr.write(_INTERRUPT_MESSAGE.replace(
+            "interrupted", f"interrupted inside a long solver call, ended after "
+            f"{FORCE_EXIT_AFTER:g} s") + "\n")
+        sys.stderr.flush()
+        os._exit(INTERRUPTED)
+
+    def close(self) -> None:
+        """The run is over: no forced exit from now on; the wakeup socket as it was."""
+        self._done.set()
+        signal.set_wakeup_fd(self._previous)
+        self._read.shutdown(socket.SHUT_RDWR)  # wakes the thread's recv
+        self._write.close()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``motion`` executable; returns the process exit code
     (0: solved and written; 1: the solver did not succeed, outputs written anyway; 2: bad
@@ -134,26 +189,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     _signals.clear()
     _ending.clear()
     previous = {}
+    watch = None
     if threading.current_thread() is threading.main_thread():
         # also when started with SIGINT ignored (a background job of a non-interactive
         # shell); SIGTERM (a supervisor, `timeout`) as Ctrl-C; the caller's handlers back
         # on return (main called in a process of its own making, e.g. a test)
         previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT,
                                                                      signal.SIGTERM)}
+        watch = _SignalWatch()
     try:
-        return _main(argv)
+        return _main(argv, watch)
     except KeyboardInterrupt:
         _ending.append(True)
-        print("motion: interrupted (the outputs are not written, or not all of them)",
-              file=sys.stderr)
+        print(_INTERRUPT_MESSAGE, file=sys.stderr)
         return INTERRUPTED
     finally:
         _ending.append(True)
+        if watch is not None:
+            watch.close()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
 
 
-def _main(argv: Sequence[str] | None) -> int:
+def _main(argv: Sequence[str] | None, watch: _SignalWatch | None = None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -185,6 +243,8 @@ def _main(argv: Sequence[str] | None) -> int:
             # before the folder is made: a bad locked_joints left an empty one
             model = robot_model(cfg, getattr(settings, "locked_joints", ()))
             made = _first_missing(out)
+            if watch is not None:
+                watch.cleanup.append(lambda: _remove_empty(out, made))
             try:
                 out.mkdir(parents=True, exist_ok=True)
             except OSError as exc:  # under a file, no permission: a traceback after the solve
