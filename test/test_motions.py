@@ -877,9 +877,10 @@ def test_the_leap_events_follow_the_scheduled_flight_not_the_first_unloaded_run(
 
 
 @pytest.mark.slow
-def test_the_walk_with_a_gait_that_never_lifts_a_foot_is_summarised(tmp_path):
+def test_the_walk_with_a_gait_that_never_lifts_a_foot_is_summarised(tmp_path, capsys):
     """gait 'stand' (no cycle: period inf): the summary averaged over 'the last cycles' and
-    the run ended in an OverflowError after the solve, no outputs."""
+    the run ended in an OverflowError after the solve, no outputs. Its 0.3 m/s command is
+    not followed: said (it was 'solved' without a word)."""
     import json
 
     from horizon_mpc.motions.cli import main
@@ -890,6 +891,24 @@ def test_the_walk_with_a_gait_that_never_lifts_a_foot_is_summarised(tmp_path):
     summary = json.loads((out / "summary.json").read_text())["results"]
     assert summary["gait_period"] == "inf" and summary["window"] == [0.0, 1.0]
     assert "force_periodicity" not in summary and summary["swing_apex"] is None
+    printed = capsys.readouterr().out
+    assert "walk: solved" in printed
+    mean = [round(x, 3) for x in summary["mean_velocity"]]
+    assert f"WARNING: the walk's mean velocity (vx, vy, wz) {mean} is" in printed, printed
+
+
+def test_a_walk_far_from_its_velocity_reference_is_warned_about():
+    from horizon_mpc.motions.cli import velocity_warning
+
+    walk = {"velocity_reference": [0.3, 0.0, 0.0], "mean_velocity": [0.29, 0.01, 0.0]}
+    assert velocity_warning({**walk, "velocity_error": 0.047}) is None
+    assert velocity_warning({**walk, "velocity_error": 0.5}) == (
+        "the walk's mean velocity (vx, vy, wz) [0.29, 0.01, 0.0] is 50% off its reference "
+        "[0.3, 0.0, 0.0]: the motion is consistent, but does not follow the command")
+    standing = {"velocity_reference": [0.0, 0.0, 0.0], "mean_velocity": [0.25, 0.0, 0.0],
+                "velocity_error": 0.25}
+    assert "0.250 m/s for a zero reference" in velocity_warning(standing)
+    assert velocity_warning({"final_yaw": 1.57}) is None  # a leap, a turn
 
 
 def test_verbose_prints_the_solvers_iterations_as_they_go(tmp_path, capsys):

@@ -316,6 +316,9 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
         print(f"  WARNING: the plan's torques reach {ratio:.3g} times the URDF effort limits "
               f"(torque_limit_scale {getattr(settings, 'torque_limit_scale', None)}): more than "
               "the robot's motors are rated for")
+    warning = velocity_warning(res.summary)
+    if warning:
+        print(f"  WARNING: {warning}")
     if "pybullet_replay" in extra:
         print(f"  pybullet_replay: {extra['pybullet_replay']}")
         if "not_replayed" in extra["pybullet_replay"]:
@@ -334,6 +337,24 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
 #: share beyond 1 of the largest torque / URDF effort limit that is said (a plan at its
 #: bounds reaches them within the solver's tolerance)
 TORQUE_RATIO_TOLERANCE = 1e-3
+#: a walk's ``velocity_error`` (relative; m/s for a zero reference) that is warned about:
+#: the shipped walks are within 0.6-12 %
+VELOCITY_ERROR_WARNING = 0.2
+
+
+def velocity_warning(summary: dict) -> str | None:
+    """What to say of a walk whose mean velocity is more than
+    :data:`VELOCITY_ERROR_WARNING` off its reference (None: nothing, or not a walk): its
+    success is the problem's (converged, physically consistent), not the command's."""
+    error = summary.get("velocity_error")
+    if not isinstance(error, float) or error <= VELOCITY_ERROR_WARNING:
+        return None
+    reference = summary["velocity_reference"]
+    mean = [round(x, 3) for x in summary["mean_velocity"]]
+    off = (f"{error:.0%} off its reference" if any(reference) else
+           f"{error:.3f} m/s for a zero reference")
+    return (f"the walk's mean velocity (vx, vy, wz) {mean} is {off} {reference}: the motion "
+            "is consistent, but does not follow the command")
 
 
 def _replay_warning(rep: dict) -> str:
