@@ -54,7 +54,7 @@ from horizon_mpc.closed_loop_report import (
     gif_frame_period,
     render_replay,
 )
-from horizon_mpc.config import RobotConfig, load_robot_config
+from horizon_mpc.config import RobotConfig, load_robot_config, parse_yaml
 from horizon_mpc.locomotion import GaitSettings, MpcSettings, config_gait, speed_scale
 from horizon_mpc.nodes.mpc_node import MpcNode
 from horizon_mpc.nodes.mpc_parameters import MODEL_PARAMETERS, gait_duty_factor, parameter_names
@@ -795,7 +795,7 @@ def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, li
             raise ValueError(f"-p {name}: mpc_node has no such parameter; it has "
                              f"{', '.join(n for n in known if n not in _HARNESS_PARAMETERS)}")
         try:
-            params[name] = yaml.safe_load(value)
+            params[name] = parse_yaml(value)
         except yaml.YAMLError as exc:
             raise ValueError(f"-p {name}: {value!r} is not a YAML value ({exc})") from None
     try:  # last: a refused command line leaves no folder behind

@@ -26,6 +26,7 @@ import dataclasses
 import logging
 import math
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +36,8 @@ import numpy as np
 import yaml
 
 __all__ = ["RobotConfig", "SimGains", "check_settings", "config_dirs", "field_default",
-           "find_config_file", "load_robot_config", "nearest_name", "read_yaml"]
+           "find_config_file", "load_robot_config", "merged", "nearest_name", "parse_yaml",
+           "read_yaml"]
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +139,32 @@ class _UniqueKeyLoader(yaml.SafeLoader):
                     None, None, f"key {key!r} given twice in one mapping", key_node.start_mark)
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
+
+
+# a number in exponent notation without a point (1e-4) is a float, as in YAML 1.2 and the
+# ROS parameter files: PyYAML's YAML 1.1 read it as the text '1e-4', and a weight given so
+# was "not a number"
+_UniqueKeyLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
+
+
+def parse_yaml(text: str) -> Any:
+    """The data of a YAML text (a ``--set`` value), read as :func:`read_yaml` reads files."""
+    return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
+
+
+def merged(*layers: dict[str, Any]) -> dict[str, Any]:
+    """The settings of ``layers``, later ones over earlier ones key by key, mappings merged
+    the same way (a ``{gait: {name: walk}}`` over a config's ``mpc`` changes the gait's
+    name only, not its step duration and height too)."""
+    out: dict[str, Any] = {}
+    for layer in layers:
+        for key, value in layer.items():
+            if isinstance(value, dict) and isinstance(out.get(key), dict):
+                value = merged(out[key], value)
+            out[key] = value
+    return out
 
 
 def read_yaml(path: str | Path) -> Any:
@@ -263,8 +291,10 @@ def _edits(a: str, b: str) -> int:
 
 def nearest_name(name: str, known: list[str]) -> str | None:
     """The first of ``known`` within a few edits of ``name`` (a typo of it: at most a
-    quarter of its letters, at least one), else None."""
-    return next((n for n in known if _edits(name, n) <= max(1, len(n) // 4)), None)
+    quarter of its letters, at least one; upper and lower case alike: ``MPC`` is ``mpc``),
+    else None."""
+    low = name.lower()
+    return next((n for n in known if _edits(low, n.lower()) <= max(1, len(n) // 4)), None)
 
 
 def _urdf_path(path: Path, value: Any) -> str | None:
@@ -307,9 +337,18 @@ def load_robot_config(name_or_path: str | Path) -> RobotConfig:
         raise ValueError(f"{path}: expected a YAML mapping at the top level")
     if not data.get("robot") and not data.get("urdf_path"):
         raise ValueError(f"{path}: needs 'robot' (example-robot-data name) or 'urdf_path'")
+    for key in ("robot", "base_link", "nominal_posture"):
+        if data.get(key) is not None and not isinstance(data[key], str):
+            raise ValueError(f"{path}: '{key}' must be a name, got {data[key]!r}")
     feet = data.get("feet")
     if not isinstance(feet, list) or not feet:
         raise ValueError(f"{path}: 'feet' must be a non-empty list of contact frame names")
+    twice = sorted({str(f) for f in feet if feet.count(f) > 1})
+    if twice:  # was "a constraint or cost called 'FL_foot_velocity' already exists"
+        raise ValueError(f"{path}: 'feet' names {twice} more than once")
+    if data.get("base_link", "base") in feet:
+        raise ValueError(f"{path}: 'feet' names the base link {data.get('base_link', 'base')!r}"
+                         ": a foot is a contact frame of a leg")
     _check_top_level_keys(path, data)
     joints = _mapping(path, "nominal_joints", data.get("nominal_joints"))
     return RobotConfig(

@@ -622,6 +622,68 @@ def test_a_receding_horizon_around_an_obstacle_converges_on_every_tick():
         assert solver.stats.iterations <= 200
 
 
+def _random_small_mpc(x0: np.ndarray):
+    """An auditor's randomly generated MPC (seed 0 of their generator): a linear system of
+    two positions, velocity bounds on a few nodes, input bounds fixed and one-sided, a final
+    and a mid-horizon equality, a mixed inequality; infeasible from its first state."""
+    inf = np.inf
+    prb = Problem(7)
+    q = prb.create_state_variable("q", 2)
+    v = prb.create_state_variable("v", 2)
+    a = prb.create_input_variable("a", 2)
+    ref = prb.create_parameter("ref", 2)
+    acc = cs.vertcat(
+        -0.267835 * q[0] + 0.180798 * q[1] - 0.140747 * v[0] - 0.253084 * v[1]
+        - 0.325031 * a[0] - 0.218792 * a[1],
+        0.652 * q[0] + 0.47354 * q[1] - 0.124655 * v[0] - 0.0082652 * v[1]
+        - 1.24591 * a[0] + 1.26773 * a[1]) + 0.1 * ref
+    prb.set_dynamics(cs.vertcat(v, acc))
+    prb.set_dt(0.05)
+    q.set_bounds(x0[:2], x0[:2], nodes=0)
+    v.set_bounds(x0[2:], x0[2:], nodes=0)
+    a.set_bounds([[-3, -2, -3, -inf, -2, -3, 0.3], [-2, -2, -inf, -2, -2, -3, -inf]],
+                 [[3, inf, 3, inf, inf, 3, 0.3], [inf, inf, inf, inf, inf, 3, 2]])
+    v.set_bounds(-1.5, 1.5, nodes=[3, 5, 7])
+    prb.create_cost("effort", a, weight=1.1859)
+    prb.create_cost("track", q - ref, weight=2.0206)
+    prb.create_final_constraint("goal", q[0] + 0.156961)
+    prb.create_constraint("mid", v[0], nodes=[5])
+    prb.create_constraint("ineq", q[0] + q[1] + 0.3 * a[0], nodes=[2, 3, 4, 5],
+                          bounds=(-inf, 0.246854))
+    ref.assign([[-0.644181, 0.197561, 0.214932, 0.348021, -0.592059, -0.330851, -0.218218,
+                 -0.584901],
+                [0.869684, -0.247955, 0.164485, -0.129286, 0.791736, 0.660180, 0.316676,
+                 -1.101755]])
+    return prb, q, v, ref
+
+
+@pytest.mark.parametrize("opts", [{}, {"input_bounds": "lagrangian"}, {"input_bounds": "box"}])
+def test_the_tick_after_an_infeasible_one_starts_without_its_multipliers(opts):
+    """The multipliers an infeasible tick left below rho_max were kept as the next, feasible
+    tick's warm start: it stopped at max_iter (cost 5440, violation 0.88) where a fresh
+    solver from the same shifted guess converged in 28 iterations to IPOPT's 2806."""
+    prb, q, v, ref = _random_small_mpc(np.array([-0.272129, -0.158150, 0.205815, 0.521257]))
+    solver = make_solver("ilqr", prb, opts)
+    assert not solver.solve()  # infeasible
+    x1 = np.vstack([solver.solution["q"], solver.solution["v"]])[:, 1] + 0.02 * \
+        np.random.default_rng(0).normal(size=4)
+    solver.shift()
+    q.set_bounds(x1[:2], x1[:2], nodes=0)
+    v.set_bounds(x1[2:], x1[2:], nodes=0)
+    values = ref.values.copy()
+    values[:, -1] += 0.3
+    ref.assign(values)
+    guess = {n: prb.get_variable(n).initial_guess.copy() for n in ("q", "v", "a")}
+    assert solver.solve(), solver.stats.status
+    fresh, *_, fresh_ref = _random_small_mpc(x1)
+    fresh_ref.assign(values)
+    for name, value in guess.items():
+        fresh.get_variable(name).set_initial_guess(value)
+    ipopt = make_solver("ipopt", fresh)
+    assert ipopt.solve()
+    assert solver.stats.cost == pytest.approx(ipopt.stats.cost, rel=1e-5)
+
+
 @pytest.mark.parametrize("opts", [{}, {"codegen": False}, {"equality": "lagrangian"},
                                   {"input_bounds": "box"}, {"line_search": False}])
 def test_a_point_where_no_step_can_be_computed_is_never_called_converged(opts):

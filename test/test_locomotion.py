@@ -423,6 +423,31 @@ def test_a_new_step_duration_while_trotting_keeps_the_cycles_phase():
     assert sch.gait.step_duration == 0.5 and sch.pending is None
 
 
+def test_stepping_in_place_asked_during_a_stop_starts_once_the_stop_ends():
+    """stand_when_idle off while a stop's swings were ending: the stop was never cleared,
+    every later swing stayed stance for good while 'walking' (go2 pushed along on planted
+    feet at 0.3 m/s, then fell)."""
+    sch = GaitScheduler(make_gait("trot", step_duration=0.3, step_height=0.07))
+    t = 0.0
+    for _ in range(100):
+        sch.command(t, True)
+        t += 0.02
+    sch.command(t, False)  # the stop: the swings in progress end
+    t += 0.1
+    sch.stand_when_idle = False
+    sch.command(t, False)
+    assert sch.t_stop is not None  # still ending them
+    for _ in range(50):
+        sch.command(t, False)
+        t += 0.02
+    assert sch.t_stop is None and sch.walking
+    assert not sch.schedule(t, 24, 0.02).stance.all()  # stepping in place
+    for _ in range(50):
+        sch.command(t, True)
+        t += 0.02
+    assert not sch.schedule(t, 24, 0.02).stance.all() and sch.t_stop is None
+
+
 def test_another_gait_while_walking_starts_once_the_swings_in_progress_end():
     sch = GaitScheduler(make_gait("trot", step_duration=0.3))
     sch.command(0.0, moving=True)

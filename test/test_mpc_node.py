@@ -706,6 +706,28 @@ def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):
                            Parameter("max_vx", value=max_vx)])
 
 
+def test_diagnostics_name_the_gait_walked_and_the_one_pending(context, walking_mpc):
+    """A gait set while walking is taken once the swings in progress end: diagnostics said
+    the new one at once, beside the old one's gait_phase (an auditor's burst of gait sets
+    alternated walk/trot there while the robot trotted on)."""
+    node = sim_time_node(context, walking_mpc, diagnostics_rate=0.0)
+    try:
+        drive_in_sim_time(node, 3)
+        sch = node.mpc.scheduler
+        sch.command(node.mpc.t_last, True)  # walking (as a command would start it)
+        assert sch.walking and sch.gait.name == "trot"
+        assert node.set_parameters([Parameter("gait", value="walk")])[0].successful
+        assert sch.gait.name == "trot" and sch.pending.name == "walk"
+        node._publish_diagnostics(node.plan, 11 * NS_PER_S)
+        values = {kv.key: kv.value for kv in node._pub_diag.msgs[-1].status[0].values}
+        assert (values["gait"], values["gait_pending"]) == ("trot", "walk")
+        assert values["gait_phase"] != "nan"
+    finally:
+        node.set_parameters([Parameter("gait", value="trot")])
+        node.mpc.scheduler.reset(0.0)  # standing, the trot taken (a module-wide controller)
+        node.destroy_node()
+
+
 def test_use_sim_time_is_refused_live_and_its_value_kept(harness):
     """A live use_sim_time change was accepted: every state was then stale (or stamped ahead
     of the clock) until it was set back (sim_node refuses one). Setting the value it has is

@@ -58,13 +58,15 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _overrides(items: Sequence[str]) -> dict:
+    from horizon_mpc.config import parse_yaml  # read as the config files are (1e-4 a number)
+
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise ValueError(f"--set expects KEY=VALUE, got {item!r}")
         try:
-            out[key.strip()] = yaml.safe_load(value)
+            out[key.strip()] = parse_yaml(value)
         except yaml.YAMLError as exc:  # six lines of PyYAML's, naming no item
             mark = getattr(exc, "problem_mark", None)
             where = f" at column {mark.column + 1}" if mark is not None else ""

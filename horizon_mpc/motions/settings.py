@@ -19,7 +19,13 @@ import dataclasses
 from pathlib import Path
 from typing import Any, TypeVar
 
-from horizon_mpc.config import check_settings, field_default, find_config_file, read_yaml
+from horizon_mpc.config import (
+    check_settings,
+    field_default,
+    find_config_file,
+    merged,
+    read_yaml,
+)
 
 __all__ = ["MotionConfig", "check_settings", "load_motion_config", "motion_settings"]
 
@@ -47,7 +53,7 @@ class MotionConfig:
                 or a value of another kind than the setting's default (a number where a
                 whole number is due, text for a number, ...: named with the key).
         """
-        values = _merged(self.settings, self.robots.get(robot or self.robot, {}),
+        values = merged(self.settings, self.robots.get(robot or self.robot, {}),
                          overrides or {})
         fields = {f.name: f for f in dataclasses.fields(cls)}
         unknown = sorted(set(values) - set(fields))
@@ -65,17 +71,6 @@ class MotionConfig:
                       for k, v in values.items()})
 
 
-def _merged(*layers: dict[str, Any]) -> dict[str, Any]:
-    """The settings of ``layers``, later ones over earlier ones key by key, mappings merged
-    the same way (``--set mpc={gait: {name: walk}}`` changes the gait's name only: it
-    replaced the config's whole ``mpc`` mapping, and the walk's 40 nodes became 24)."""
-    out: dict[str, Any] = {}
-    for layer in layers:
-        for key, value in layer.items():
-            if isinstance(value, dict) and isinstance(out.get(key), dict):
-                value = _merged(out[key], value)
-            out[key] = value
-    return out
 
 
 def _checked_value(key: str, value: Any, default: Any, nullable: bool = False) -> Any:

@@ -77,6 +77,13 @@ class GaitScheduler:
         if self.gait.stands:
             return
         if not self.stand_when_idle:
+            if self.t_stop is not None:
+                # stepping in place asked during a stop: the stop ends first, then the
+                # gait starts afresh (t_stop was never cleared: every swing stayed stance
+                # for good, while walking; go2 pushed along on planted feet, then fell)
+                if not self._swings_ended(t):
+                    return
+                self.t_start = self.t_stop = None
             if self.t_start is None:
                 self.t_start = t
             return

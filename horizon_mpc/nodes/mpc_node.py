@@ -820,7 +820,10 @@ class MpcNode(MpcParameters, Node):
             "deadline_misses": self.deadline_misses,
             "solver_errors": self.solver_errors,
             "state_age_ms": self.last_state_age * 1e3,
-            "gait": self.mpc.settings.gait.name,
+            # the gait walked (gait_phase is its), and the one set, taken once the
+            # swings in progress end (it said the one set at once)
+            "gait": self.mpc.scheduler.gait.name,
+            "gait_pending": getattr(self.mpc.scheduler.pending, "name", ""),
             "gait_phase": self.gait_phase(stamp_ns / NS_PER_S),
             "command": np.round(self.mpc.cmd, 4).tolist(),
             "ticks": self.ticks,

@@ -286,16 +286,6 @@ class AugmentedLagrangian:
         self.rho[:] = self.rho0
         self._last_violation[:] = np.inf
 
-    def forget_diverged(self, limit: float) -> int:
-        """Zero the multipliers of the rows where one is larger than ``limit`` in magnitude
-        (a solve pushing against an infeasible problem, not an estimate to start from);
-        returns how many rows."""
-        big = (np.abs(self.lam) > limit) | (self.lam_lo > limit) | (self.lam_up > limit)
-        if big.any():
-            self.lam[big] = self.lam_lo[big] = self.lam_up[big] = 0.0
-            self._last_violation[big] = np.inf
-        return int(np.count_nonzero(big))
-
     def reset(self) -> None:
         """Forget multipliers and penalties."""
         self.lam[:] = self.lam_lo[:] = self.lam_up[:] = 0.0

@@ -887,16 +887,13 @@ class IlqrSolver(Solver):
     def _after_failed_solve(self) -> None:
         """What a converging solve that failed leaves for the next one: the initial
         penalties (those it ratcheted to rho_max, carried on by shift(), left every later
-        solve of a receding horizon ill-conditioned), and no multiplier past rho_max (an
-        infeasible problem's, e.g. 1.7e11 on a final equality a state box made unreachable:
-        kept, they held the next solve at max_iter after the box was relaxed)."""
-        self._al.reset_penalties()
-        self._alN.reset_penalties()
-        rho_max = self.opts["rho_max"]
-        dropped = self._al.forget_diverged(rho_max) + self._alN.forget_diverged(rho_max)
-        if dropped:
-            log.info("ilqr: %d constraint row(s) ended with multipliers above rho_max (%g): "
-                     "the next solve starts them at zero", dropped, rho_max)
+        solve of a receding horizon ill-conditioned) and no multipliers: a failed solve's
+        are no estimate to start from (an infeasible problem's, e.g. 1.7e11 on a final
+        equality a state box made unreachable, held the next solve at max_iter after the
+        box was relaxed; those below rho_max, kept until session 30, held a random MPC's
+        next, feasible tick at max_iter where a fresh solver converged in 28 iterations)."""
+        self._al.reset()
+        self._alN.reset()
 
     def _failed_call(self, status: str, t_start: float) -> None:
         """Stats of a call that ran no iteration: none of the previous call's iterations,
