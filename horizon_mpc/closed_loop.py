@@ -215,7 +215,7 @@ def warn_unreached_segments(segments: Sequence[Segment], cfg: RobotConfig,
     limits (:func:`command_limits`: its ``-p max_vx``..., gait and ``max_command_norm``;
     until session 28 the config's, so a ``-p max_vx`` flip profile went unwarned) and the
     config's ``max_acceleration``."""
-    st = MpcSettings.from_dict(cfg.section("mpc"))
+    st = MpcSettings.from_config(cfg)
     try:
         max_velocity, max_norm = command_limits(cfg, mpc_parameters)
     except (TypeError, ValueError):  # a bad -p value: the MPC node refuses it, naming it
@@ -236,7 +236,7 @@ def command_limits(cfg: RobotConfig, mpc_parameters: Mapping[str, object] | None
     gait's :func:`~horizon_mpc.locomotion.speed_scale` (``-p gait``, ``step_duration``,
     ``duty_factor`` against the config's gait); and the combined one, ``max_command_norm``
     (:func:`horizon_mpc.locomotion.command.limit_command`)."""
-    st = MpcSettings.from_dict(cfg.section("mpc"))
+    st = MpcSettings.from_config(cfg)
     given = dict(mpc_parameters or {})
     g = st.gait
     gait = GaitSettings(str(given.get("gait", g.name)),
@@ -433,7 +433,7 @@ def control_period(robot: str, mpc_parameters: Mapping[str, object] | None = Non
     dt=0.03`` a third of the periods were reported without a tick, none missing)."""
     given = dict(mpc_parameters or {})
     name = "control_rate" if "control_rate" in given else "dt"
-    raw = given.get(name, MpcSettings.from_dict(load_robot_config(robot).section("mpc")).dt)
+    raw = given.get(name, MpcSettings.from_config(load_robot_config(robot)).dt)
     # a YAML number; a text, a list or a bool is no rate
     value = float(raw) if isinstance(raw, (int, float)) and not isinstance(raw, bool) else (
         math.nan)

@@ -186,6 +186,63 @@ def test_a_config_value_of_the_wrong_kind_is_one_error_naming_file_and_key(tmp_p
     assert "mine.yaml" in str(err.value)
 
 
+@pytest.mark.parametrize("text, match", [
+    ("robot: [go2]\nfeet: [FL_foot, FR_foot, RL_foot, RR_foot]\n",
+     r"'robot' must be a name, got \['go2'\]"),
+    ("robot: go2\nfeet: [FL_foot, FL_foot, RL_foot, RR_foot]\n",
+     r"'feet' names \['FL_foot'\] more than once"),
+    ("robot: go2\nfeet: [FL_foot, FR_foot, RL_foot, base]\n", "'feet' names the base link 'base'"),
+    (_GO2 + "MPC: {n_nodes: 30}\n", r"'MPC' \(did you mean 'mpc'\?\)"),
+])
+def test_a_config_a_robot_cannot_be_built_from_is_refused_by_key(tmp_path, text, match):
+    """An auditor's configs: a list for robot was 'unhashable type' from deep inside, a foot
+    named twice "a constraint or cost called 'FL_foot_velocity' already exists", and an
+    'MPC:' section was ignored (warned about) and the defaults used."""
+    with pytest.raises(ValueError, match=match) as err:
+        _config(tmp_path, text)
+    assert "mine.yaml" in str(err.value)
+
+
+@pytest.mark.parametrize("section, match", [
+    ("mpc: [1]\n", r"'mpc' must be a mapping of \["),
+    ("mpc: trot\n", r"'mpc' must be a mapping of \["),
+    ("mpc: {n_nodes: 1}\n", r"'mpc.n_nodes' must be an integer in \[2, 500\], got 1"),
+    ("mpc: {dt: 0.6}\n", r"'mpc.dt' must be in \[0.001, 0.5\], got 0.6"),
+    ("mpc: {iterations: 60}\n", r"'mpc.iterations' must be an integer in \[1, 50\]"),
+    ("mpc: {gait: {step_height: 0.35}}\n", r"'mpc.gait.step_height' must be in \[0, 0.3\]"),
+    ("mpc: {gait: {step_duration: 3.0}}\n", r"'mpc.gait.step_duration' must be in \[0.05, 2\]"),
+    ("mpc: {gait: {duty_factor: 0.01}}\n", r"'mpc.gait.duty_factor' must be in \[0.05, 1\]"),
+    ("mpc: {max_velocity: [6.0, 0.3, 0.5]}\n", r"'mpc.max_velocity' must be 3 numbers in \[0, 5\]"),
+    ("mpc: {max_command_norm: 0.001}\n", r"'mpc.max_command_norm' must be in \[0.01, 10\]"),
+    ("mpc: {weights: {posture: 2.0e+9}}\n",
+     r"'mpc.weights.posture' must be a number in \[0, 1e\+09\]"),
+])
+def test_mpc_settings_the_node_refuses_are_refused_everywhere_naming_the_file(tmp_path,
+                                                                              section, match):
+    """The MPC node declares its parameters with these ranges; the library and the motion
+    CLI took the values (a walk of 1 node 'solved') and the node said 'Parameter n_nodes out
+    of range', a parameter the user never set. And the file was not named."""
+    from horizon_mpc.locomotion import MpcSettings
+
+    cfg = _config(tmp_path, _GO2 + section)
+    with pytest.raises(ValueError, match=match) as err:
+        MpcSettings.from_config(cfg)
+    assert str(err.value).startswith(str(tmp_path / "mine.yaml"))
+
+
+def test_exponents_without_a_point_are_numbers_and_overrides_merge_key_by_key(tmp_path):
+    """PyYAML read 1e-4 as the text '1e-4' ("must be a finite number", of a number); a
+    gait override replaced the config's whole gait (the walk CLI's --set mpc={gait: {name:
+    walk}} took the library's step duration and height, not solo12's)."""
+    from horizon_mpc.locomotion import MpcSettings
+
+    cfg = _config(tmp_path, _GO2 + "mpc: {weights: {acceleration: 1e-4, force: 2E+3}, "
+                  "gait: {step_duration: 0.25, step_height: 0.04}}\n")
+    st = MpcSettings.from_config(cfg, {"gait": {"name": "walk"}, "weights": {"posture": 1.0}})
+    assert (st.weights.acceleration, st.weights.force, st.weights.posture) == (1e-4, 2e3, 1.0)
+    assert (st.gait.name, st.gait.step_duration, st.gait.step_height) == ("walk", 0.25, 0.04)
+
+
 def test_a_key_far_from_any_known_one_is_ignored_with_a_warning(tmp_path, caplog):
     """A user's own note in a config (not a typo of a known key) does not stop the robot."""
     with caplog.at_level("WARNING", logger="horizon_mpc.config"):

@@ -12,14 +12,36 @@ from typing import Any
 
 import numpy as np
 
-from horizon_mpc.config import RobotConfig, check_settings, field_default
+from horizon_mpc.config import RobotConfig, check_settings, field_default, merged
 from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM
 from horizon_mpc.locomotion.gaits import GAITS, Gait, make_gait
 
-__all__ = ["MAX_COMMAND_NORM", "GaitSettings", "MpcSettings", "Weights", "config_gait"]
+__all__ = ["DT_RANGE", "ITERATIONS_RANGE", "MAX_COMMAND_NORM", "MAX_VELOCITY", "MAX_WEIGHT",
+           "MIN_COMMAND_NORM", "MIN_DUTY_FACTOR", "N_NODES_RANGE", "STEP_DURATION_RANGE",
+           "STEP_HEIGHT_RANGE", "GaitSettings", "MpcSettings", "Weights", "config_gait"]
 
 #: the largest max_command_norm (>= sqrt(3) already leaves the per-axis limits alone)
 MAX_COMMAND_NORM = 10.0
+# The ranges of the settings the MPC node also takes as parameters (it declares them with
+# these): a config value outside one was refused by the node only, as a parameter the user
+# never set, while the library and the motion CLI ran it (a walk of 1 node 'solved')
+N_NODES_RANGE = (2, 500)
+DT_RANGE = (0.001, 0.5)  # s
+ITERATIONS_RANGE = (1, 50)
+STEP_DURATION_RANGE = (0.05, 2.0)  # s
+STEP_HEIGHT_RANGE = (0.0, 0.3)  # m
+MIN_DUTY_FACTOR = 0.05
+MAX_VELOCITY = 5.0  # m/s or rad/s, each command limit
+MIN_COMMAND_NORM = 0.01
+#: a cost weight above this is refused: w_posture 1e30 made the cost 1e32, the solver fail
+#: every tick and go2 sink to the ground (1e8 was harmless; the configs use up to ~1e4)
+MAX_WEIGHT = 1e9
+
+
+def _within(name: str, value: float, bounds: tuple[float, float]) -> None:
+    lo, hi = bounds
+    if not lo <= value <= hi:
+        raise ValueError(f"setting {name!r} must be in [{lo:g}, {hi:g}], got {value!r}")
 
 
 #: the walking problem's swing clearance and inequality treatments
@@ -43,11 +65,13 @@ class GaitSettings:
                        prefix="mpc.gait.")
         if self.name not in GAITS:
             raise ValueError(f"'mpc.gait.name' must be one of {list(GAITS)}, got {self.name!r}")
+        _within("mpc.gait.step_duration", self.step_duration, STEP_DURATION_RANGE)
+        _within("mpc.gait.step_height", self.step_height, STEP_HEIGHT_RANGE)
         if self.duty_factor is not None and not (
                 isinstance(self.duty_factor, (int, float)) and not isinstance(
-                    self.duty_factor, bool) and 0 < self.duty_factor <= 1):
-            raise ValueError(f"'mpc.gait.duty_factor' must be in (0, 1] (or null: the gait's "
-                             f"own), got {self.duty_factor!r}")
+                    self.duty_factor, bool) and MIN_DUTY_FACTOR <= self.duty_factor <= 1):
+            raise ValueError(f"'mpc.gait.duty_factor' must be in [{MIN_DUTY_FACTOR:g}, 1] (or "
+                             f"null: the gait's own), got {self.duty_factor!r}")
 
     def to_gait(self, n_feet: int) -> Gait:
         """The :class:`~horizon_mpc.locomotion.gaits.Gait` of these settings for ``n_feet``
@@ -95,12 +119,12 @@ class Weights:
             if isinstance(default, list):
                 if not (isinstance(value, (list, tuple, np.ndarray)) and np.ndim(value) == 1
                         and len(value) == len(default)
-                        and all(_number(x) and x >= 0 for x in value)):
-                    raise ValueError(f"setting {name!r} must be {len(default)} numbers >= 0 "
-                                     f"(one per row), got {value!r}")
-            elif not (_number(value) and value >= 0):
-                raise ValueError(f"setting {name!r} must be a finite number >= 0, got "
-                                 f"{value!r}")
+                        and all(_number(x) and 0 <= x <= MAX_WEIGHT for x in value)):
+                    raise ValueError(f"setting {name!r} must be {len(default)} numbers in "
+                                     f"[0, {MAX_WEIGHT:g}] (one per row), got {value!r}")
+            elif not (_number(value) and 0 <= value <= MAX_WEIGHT):
+                raise ValueError(f"setting {name!r} must be a number in [0, {MAX_WEIGHT:g}], "
+                                 f"got {value!r}")
 
 
 @dataclass
@@ -176,19 +200,22 @@ class MpcSettings:
                        non_negative=("pose_leash", "yaw_leash", "max_extrapolation",
                                      "feedback_tolerance"),
                        prefix="mpc.")
-        if self.max_command_norm > MAX_COMMAND_NORM:
-            raise ValueError(f"'mpc.max_command_norm' must be in (0, {MAX_COMMAND_NORM:g}] "
-                             f"(>= 1.733 keeps the per-axis limits only), got "
-                             f"{self.max_command_norm!r}")
-        for name in ("n_nodes", "iterations"):
+        if not MIN_COMMAND_NORM <= self.max_command_norm <= MAX_COMMAND_NORM:
+            raise ValueError(f"'mpc.max_command_norm' must be in [{MIN_COMMAND_NORM:g}, "
+                             f"{MAX_COMMAND_NORM:g}] (>= 1.733 keeps the per-axis limits "
+                             f"only), got {self.max_command_norm!r}")
+        _within("mpc.dt", self.dt, DT_RANGE)
+        for name, (lo, hi) in (("n_nodes", N_NODES_RANGE), ("iterations", ITERATIONS_RANGE)):
             value = getattr(self, name)
-            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-                raise ValueError(f"'mpc.{name}' must be an integer >= 1, got {value!r}")
-        for name in ("max_velocity", "max_acceleration"):
+            if not (isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi):
+                raise ValueError(f"'mpc.{name}' must be an integer in [{lo}, {hi}], got "
+                                 f"{value!r}")
+        for name, top in (("max_velocity", MAX_VELOCITY), ("max_acceleration", math.inf)):
             value = getattr(self, name)
             if not (isinstance(value, (list, tuple)) and len(value) == 3 and all(
-                    _number(x) and x >= 0 for x in value)):
-                raise ValueError(f"'mpc.{name}' must be 3 numbers >= 0 (vx, vy, wz), got "
+                    _number(x) and 0 <= x <= top for x in value)):
+                within = ">= 0" if top == math.inf else f"in [0, {top:g}]"
+                raise ValueError(f"'mpc.{name}' must be 3 numbers {within} (vx, vy, wz), got "
                                  f"{value!r}")
         # choices ('bogus' failed at the build; flags: check_settings)
         for name, choices in (("clearance", CLEARANCES), ("inequality", INEQUALITIES)):
@@ -199,11 +226,23 @@ class MpcSettings:
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> MpcSettings:
         """Settings from a YAML mapping; unknown keys raise ``ValueError`` naming them."""
-        data = dict(data or {})
-        _check(data, cls, "mpc")
+        data = _checked(data, cls, "mpc")
         gait = GaitSettings(**_checked(data.pop("gait", {}), GaitSettings, "mpc.gait"))
         weights = Weights(**_checked(data.pop("weights", {}), Weights, "mpc.weights"))
         return cls(gait=gait, weights=weights, **data)
+
+    @classmethod
+    def from_config(cls, cfg: RobotConfig, overrides: dict[str, Any] | None = None
+                    ) -> MpcSettings:
+        """The settings of a robot config's ``mpc:`` section with ``overrides`` merged in
+        key by key (``{gait: {name: walk}}`` changes the gait's name only); a ``ValueError``
+        names the config file (it named the key only)."""
+        section = cfg.section("mpc")
+        try:  # (a section that is no mapping: from_dict says so)
+            return cls.from_dict(merged(section, overrides or {})
+                                 if isinstance(section, dict) else section)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{cfg.source or f'robot config {cfg.name!r}'}: {exc}") from None
 
 
 def _check(data: dict, cls: type, where: str) -> None:
@@ -229,4 +268,4 @@ def _checked(data: Any, cls: type, where: str) -> dict:
 def config_gait(cfg: RobotConfig) -> Gait:
     """The gait of a robot config's ``mpc.gait`` section: the one its ``mpc.max_velocity``
     was tuned with (:func:`horizon_mpc.locomotion.gaits.speed_scale`)."""
-    return MpcSettings.from_dict(cfg.section("mpc")).gait.to_gait(len(cfg.feet))
+    return MpcSettings.from_config(cfg).gait.to_gait(len(cfg.feet))

@@ -84,7 +84,7 @@ class WalkingProblem:
 def build_walking_problem(model: RobotModel, cfg: RobotConfig,
                           settings: MpcSettings | None = None) -> WalkingProblem:
     """Build the walking OCP for ``model`` with the robot config ``cfg``."""
-    st = settings or MpcSettings.from_dict(cfg.section("mpc"))
+    st = settings or MpcSettings.from_config(cfg)
     feet = list(cfg.feet)
     _, q_nom = standing_configuration(cfg, model.pin_model)  # the model's own joints
     h_nom = float(q_nom[2]) if st.base_height is None else float(st.base_height)

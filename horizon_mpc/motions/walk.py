@@ -103,7 +103,7 @@ def run_walk(robot: str | RobotConfig = "go2", solver: str = "ilqr",
     cfg = load_robot_config(robot) if isinstance(robot, str) else robot
     st = settings or motion_settings("walk", WalkSettings, cfg.name)
     model = model or robot_model(cfg)
-    mpc = MpcSettings.from_dict({**cfg.section("mpc"), **st.mpc})
+    mpc = MpcSettings.from_config(cfg, st.mpc)
     wp = build_walking_problem(model, cfg, mpc)
     prb, N, dt = wp.prb, wp.n_nodes, mpc.dt
     if solver != "ilqr":

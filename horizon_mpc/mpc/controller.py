@@ -107,7 +107,7 @@ class WalkingMpc:
                  settings: MpcSettings | None = None, iterations: int | None = None):
         self.cfg = load_robot_config(cfg) if isinstance(cfg, str) else cfg
         self.model = model = model if model is not None else RobotModel.from_config(self.cfg)
-        self.settings = settings or MpcSettings.from_dict(self.cfg.section("mpc"))
+        self.settings = settings or MpcSettings.from_config(self.cfg)
         if iterations is None:
             iterations = self.settings.iterations
         if (isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer))

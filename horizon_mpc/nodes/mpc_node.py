@@ -194,7 +194,7 @@ class MpcNode(MpcParameters, Node):
         controller's settings) and return the settings they choose, warning about values
         outside where the robot was seen to walk."""
         # the config's own: what the gait and limits were tuned with (warnings)
-        self._config_settings = MpcSettings.from_dict(cfg.section("mpc"))
+        self._config_settings = MpcSettings.from_config(cfg)
         settings = mpc.settings if mpc is not None else copy.deepcopy(self._config_settings)
         self._declare_parameters(settings, rate_sets_horizon=mpc is None)
         horizon = (int(self._p("n_nodes")), float(self._p("dt")))

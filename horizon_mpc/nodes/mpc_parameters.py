@@ -21,7 +21,19 @@ from rclpy.parameter import Parameter
 
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.locomotion.gaits import EXPERIMENTAL_GAITS, GAITS
-from horizon_mpc.locomotion.settings import MAX_COMMAND_NORM, Weights
+from horizon_mpc.locomotion.settings import (
+    DT_RANGE,
+    ITERATIONS_RANGE,
+    MAX_COMMAND_NORM,
+    MAX_VELOCITY,
+    MAX_WEIGHT,
+    MIN_COMMAND_NORM,
+    MIN_DUTY_FACTOR,
+    N_NODES_RANGE,
+    STEP_DURATION_RANGE,
+    STEP_HEIGHT_RANGE,
+    Weights,
+)
 from horizon_mpc.nodes.declare import declare, float_range, int_range, parameter_overrides
 
 __all__ = ["DIAGNOSTICS_RATE", "LIVE_GAIT", "LIVE_LIMITS", "MIN_DUTY_FACTOR",
@@ -46,7 +58,6 @@ MODEL_PARAMETERS = tuple(d[0] for d in MODEL_PARAMETER_DECLARATIONS)
 # Hz of the node clock: a status every fifth 50 Hz tick (diagnostic tools poll at ~1 Hz);
 # its values summarise the ticks in between (solve_time_max_ms, ticks, deadline_misses)
 DIAGNOSTICS_RATE = 10.0
-MIN_DUTY_FACTOR = 0.05  # the smallest duty_factor accepted (0 stands for the gait's own)
 
 
 # where the walking MPC was seen to walk and to fall (go2, lockstep, forward 0.3 m/s and a
@@ -197,11 +208,6 @@ def timing_warnings(dt: float, n_nodes: int, period: float, publish_points: int
     return out
 
 
-#: a cost weight above this is refused: w_posture 1e30 made the cost 1e32, the solver fail
-#: every tick and go2 sink to the ground (1e8 was harmless; the configs use up to ~1e4)
-MAX_WEIGHT = 1e9
-
-
 def weight_problem(name: str, values: np.ndarray, size: int) -> str | None:
     """Why the weight parameter ``name`` cannot take ``values`` (size ``size`` needed:
     finite, within [0, MAX_WEIGHT]), or None."""
@@ -241,14 +247,14 @@ class MpcParameters:
                 "-p n_nodes choose others)")
         d("n_nodes", n_nodes, "horizon nodes (intervals) of the walking problem "
           "(default: the config's mpc.n_nodes, scaled with dt when a faster control_rate "
-          "sets it)", irng=int_range(2, 500), ro=True)
+          "sets it)", irng=int_range(*N_NODES_RANGE), ro=True)
         d("dt", dt, "duration of one horizon node (s; default: the config's mpc.dt, or the "
           "control period of a control_rate faster than that, down to "
-          f"{WALKED_DT[0]:g} s)", float_range(0.001, 0.5), ro=True)
+          f"{WALKED_DT[0]:g} s)", float_range(*DT_RANGE), ro=True)
         d("control_rate", 1.0 / float(self._p("dt")), "MPC ticks per second of the node "
           "clock (trigger timer; default: 1 / dt)", float_range(1, 1000), ro=True)
         d("iterations", int(st.iterations), "ILQR iterations per tick (default: the config's "
-          "mpc.iterations)", irng=int_range(1, 50), ro=True)
+          "mpc.iterations)", irng=int_range(*ITERATIONS_RANGE), ro=True)
         d("solve_budget", 0.85, "with trigger 'timer': the ILQR iterations after the first "
           "are skipped when they would end later than this fraction of the control period "
           "after the solve started (0: always run them all)", float_range(0, 10), ro=True)
@@ -276,21 +282,21 @@ class MpcParameters:
           ro=True)
         d("gait", st.gait.name, f"gait ({', '.join(GAITS)}); live")
         d("step_duration", float(st.gait.step_duration), "swing duration (s); live",
-          float_range(0.05, 2.0))
+          float_range(*STEP_DURATION_RANGE))
         d("step_height", float(st.gait.step_height), "swing apex height (m); live",
-          float_range(0.0, 0.3))
+          float_range(*STEP_HEIGHT_RANGE))
         d("duty_factor", float(st.gait.duty_factor or 0.0), "stance fraction of a cycle (0: "
           "the gait's own, walk 0.75, the others 0.5); live", float_range(0.0, 1.0))
         for name, vmax, unit in zip(LIVE_LIMITS, st.max_velocity, ("m/s", "m/s", "rad/s"),
                                     strict=True):
             d(name, float(vmax), f"|{name[4:]}| command limit ({unit}) of the config's gait "
               "(a gait with a longer stance, e.g. walk, gets a share of it); live",
-              float_range(0, 5))
+              float_range(0, MAX_VELOCITY))
         d("max_command_norm", float(st.max_command_norm), "combined command limit: the "
           "command's norm with each axis divided by its limit (max_vx, max_vy, max_wz) is at "
           "most this, a command beyond is scaled down along its direction (1.414: two axes at "
           "their limits together; >= 1.733: per-axis limits only); live",
-          float_range(0.01, MAX_COMMAND_NORM))
+          float_range(MIN_COMMAND_NORM, MAX_COMMAND_NORM))
         for name in WEIGHT_FIELDS:
             value = getattr(st.weights, name)
             value = [float(x) for x in value] if isinstance(value, list) else float(value)
