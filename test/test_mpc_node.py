@@ -130,6 +130,19 @@ def test_joint_state_with_a_missing_joint_names_it():
         joints_from_joint_state(JointState(name=["a", "c"], position=[0.0, 0.0]), JOINTS)
 
 
+def test_another_drivers_joint_state_and_a_mismatched_effort_are_named():
+    """A gripper driver's JointState on the topic: 'lacks joints [all of them]' (its
+    messages displaced the robot's at depth 1); an effort array of the wrong length was
+    accepted without a word (efforts are not used)."""
+    with pytest.raises(ValueError, match=r"none of the model's joints \(it names "
+                       r"\['gripper_joint'\]\): another driver's on the same topic"):
+        joints_from_joint_state(JointState(name=["gripper_joint"], position=[0.0]), JOINTS)
+    msg = JointState(name=JOINTS, position=[0.0] * 3, velocity=[0.0] * 3, effort=[math.nan])
+    qj, _, notes = joints_from_joint_state(msg, JOINTS)
+    assert notes == ["JointState.effort has 1 values for 3 names (efforts are not used)"]
+    assert mpc_node.STATE_QUEUE_DEPTH > 1
+
+
 def test_joint_readings_far_outside_the_limits_or_absurdly_fast_are_refused_by_name():
     # a calf at 10 rad (limits about [-2.7, -0.8]) was planned from and published as point 0
     limits = (np.array([-1.0, -1.0, -2.7]), np.array([1.0, 1.0, -0.8]))
@@ -404,6 +417,8 @@ def test_a_simulator_reset_is_not_blamed_on_clocks_that_differ(context, walking_
         node._on_odom(odometry_to_msg(time_from_ns(ahead), q[:3], q[3:7], zeros, zeros))
         assert not node.tick()
         assert said[-1][0] == "future" and "use_sim_time" in said[-1][1]
+        # both streams ahead: both named (a tie named odom only)
+        assert said[-1][1].startswith("joint_states and odom are stamped 1.000 s ahead")
     finally:
         node.destroy_node()
 
@@ -468,21 +483,43 @@ def test_diagnostics_say_error_when_the_measured_base_is_a_fallen_robots(context
         assert node._pub_diag.msgs[-1].status[0].level == DiagnosticStatus.OK
         ground = float(np.mean(node.mpc.ground_z))
         nominal = float(node.mpc.wp.height_ref.values[0, 0]) - ground
+        standing = node.measured_base.copy()
         for base, what in ((ground + 0.5 * nominal, "above the ground"),
                            (ground + nominal, "tilted 0.60 rad")):
-            plan = copy.copy(node.plan)
-            plan.q = plan.q.copy()
-            plan.q[2, 0] = base
+            node.measured_base = standing.copy()
+            node.measured_base[2] = base
             if what.startswith("tilted"):  # rolled 0.6 rad
-                plan.q[3:7, 0] = [np.sin(0.3), 0.0, 0.0, np.cos(0.3)]
-            node._publish_diagnostics(plan, 11 * NS_PER_S)
+                node.measured_base[3:7] = [np.sin(0.3), 0.0, 0.0, np.cos(0.3)]
+            node._publish_diagnostics(node.plan, 11 * NS_PER_S)
             status = node._pub_diag.msgs[-1].status[0]
             assert status.level == DiagnosticStatus.ERROR, what
             assert status.message.startswith("the robot seems to have fallen") and \
                 what in status.message
             assert warned[-1] == status.message
+        node.measured_base = standing
         node._publish_diagnostics(node.plan, 12 * NS_PER_S)  # standing again
         assert node._pub_diag.msgs[-1].status[0].level == DiagnosticStatus.OK
+    finally:
+        node.destroy_node()
+
+
+def test_a_fall_is_said_at_the_first_tick_of_its_state(context, walking_mpc):
+    """The check read the plan's node 0, which a prepared tick closes on the measured state
+    over ticks: a 1 rad roll was OK for 21 ticks, a base upside down for 8 (an auditor)."""
+    node = sim_time_node(context, walking_mpc, diagnostics_rate=0.0)
+    try:
+        drive_in_sim_time(node, 5)
+        _, q = standing_configuration(node.mpc.cfg)
+        ns = 10 * NS_PER_S + 5 * 20_000_000
+        node.get_clock().set_ros_time_override(RosTime(nanoseconds=ns))
+        stamp = time_from_ns(ns)
+        node._on_joint_state(joint_state_to_msg(stamp, node.joint_names, q[7:],
+                                                np.zeros(len(q) - 7)))
+        node._on_odom(odometry_to_msg(stamp, q[:3], [np.sin(0.5), 0.0, 0.0, np.cos(0.5)],
+                                      np.zeros(3), np.zeros(3)))
+        assert node.ticks == 6
+        status = node._pub_diag.msgs[-1].status[0]
+        assert status.level == DiagnosticStatus.ERROR and "tilted 1.00 rad" in status.message
     finally:
         node.destroy_node()
 
@@ -684,6 +721,19 @@ def test_bad_inputs_are_counted_and_do_not_kill_the_node(harness):
     h.spin_until(lambda: all(h.node.rejected.values()))
     h.publish_state()
     h.spin_until(lambda: h.trajectories)
+
+
+def test_a_gripper_drivers_joint_states_on_the_topic_do_not_hide_the_robots(harness):
+    """JointState has no key: at depth 1 another publisher's message replaced the robot's
+    before the node took it, and no trajectory ever came (an auditor's gripper driver)."""
+    h = harness()
+    gripper = h.probe.create_publisher(JointState, "joint_states", 10)
+    h.spin_until(lambda: gripper.get_subscription_count() > 0)
+    for k in range(3):
+        h.publish_state()
+        gripper.publish(JointState(name=["gripper_joint"], position=[0.0]))
+        h.spin_until(lambda k=k: len(h.trajectories) > k and h.node.rejected["joint_states"] > k)
+    assert h.node.rejected["joint_states"] == 3
 
 
 def test_gait_and_weights_change_live_and_bad_values_are_refused(harness):

@@ -111,6 +111,12 @@ def _name_match(names: tuple[str, ...], joint_names: tuple[str, ...]) -> tuple[
             duplicates.add(n)
         index[n] = i
     missing = [n for n in joint_names if n not in index]
+    if missing and names and len(missing) == len(joint_names):
+        shown = [clipped(n) for n in names[:NAMES_SHOWN]]
+        more = f" and {len(names) - NAMES_SHOWN} more" if len(names) > NAMES_SHOWN else ""
+        raise ValueError(f"JointState has none of the model's joints (it names {shown}{more}):"
+                         " another driver's on the same topic (a gripper's?); the robot's "
+                         "own are then the ones that arrive between its messages")
     if missing:
         raise ValueError(f"JointState lacks joints {missing}")
     needed_duplicates = sorted(duplicates & set(joint_names))
@@ -153,6 +159,9 @@ def joints_from_joint_state(
     if vel.size and vel.shape != (len(names),):
         raise ValueError(f"JointState.velocity has {vel.size} values for {len(names)} names")
     notes = list(name_notes)
+    if len(msg.effort) not in (0, len(names)):  # not used: said, not refused
+        notes.append(LayoutNote(f"JointState.effort has {len(msg.effort)} values for "
+                                f"{len(names)} names (efforts are not used)"))
     qj = pos[idx]
     if not np.all(np.isfinite(qj)):
         bad = [n for n, x in zip(joint_names, qj, strict=True) if not math.isfinite(x)]

@@ -90,6 +90,7 @@ FALLEN_HEIGHT = 0.6
 FALLEN_TILT = 0.5
 MISS_WARN_SHARE = 0.2  # prepare misses among the recent ticks beyond which the node warns
 _RECENT_STATES = 8  # joint_states / odom messages kept to pair them by stamp
+STATE_QUEUE_DEPTH = 5  # of the joint_states and odom subscriptions
 
 
 class MpcNode(MpcParameters, Node):
@@ -162,6 +163,7 @@ class MpcNode(MpcParameters, Node):
         self._clock_seen_ns: int | None = None  # the node clock at the last tick
         self._clock_back = False  # it went back since (until states of before are dropped)
         self.plan: Plan | None = None
+        self.measured_base: np.ndarray | None = None  # (7,) base pose of the last tick's state
         self.ticks = 0
         self.deadline_misses = 0
         self.stale_skips = 0
@@ -277,8 +279,12 @@ class MpcNode(MpcParameters, Node):
         self._pub_traj = self.create_publisher(JointTrajectory, "joint_trajectory", 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_path = self.create_publisher(Path, "~/predicted_base_path", 10)
-        # depth 1: a tick plans from the newest state, never from a backlog of stale ones
-        state_qos = QoSProfile(depth=1, reliability=_RELIABILITY[self._p("state_reliability")])
+        # a few: another driver's JointState on the topic (a gripper's) does not displace
+        # the robot's (JointState has no key: at depth 1 each message replaced the one
+        # before it; the node lost every robot state the other's followed). Ticks plan from
+        # the state nearest their time (_state_pair), never from a backlog
+        state_qos = QoSProfile(depth=STATE_QUEUE_DEPTH,
+                               reliability=_RELIABILITY[self._p("state_reliability")])
         # best effort by default: it also hears best-effort publishers (a reliable
         # subscription never received a joystick driver's sensor-data cmd_vel; the robot
         # stood with diagnostics OK)
@@ -623,7 +629,10 @@ class MpcNode(MpcParameters, Node):
         if ahead > self.state_timeout and self._clock_back:
             return self._after_clock_went_back(now_ns, stamp_ns)
         if ahead > self.state_timeout:
-            return self._skip_stale(-ahead, "future", f"{stream} is stamped {ahead:.3f} s "
+            # (both: said so; a tie named odom, and a user debugged its driver)
+            stream = (f"{self._input('joint_states')} and {self._input('odom')} are"
+                      if joints[0] == base[0] else f"{self._input(stream)} is")
+            return self._skip_stale(-ahead, "future", f"{stream} stamped {ahead:.3f} s "
                                     "ahead of the node's clock (more than state_timeout "
                                     f"{self.state_timeout:g} s): not planning; do the "
                                     "publisher and this node use the same clock "
@@ -631,6 +640,7 @@ class MpcNode(MpcParameters, Node):
         _, qj, vj = joints
         _, pos, quat, lin, ang = base
         q = np.concatenate((pos, quat, qj))
+        self.measured_base = q[:7]
         v = np.concatenate((lin, ang, vj))
         cmd = self.current_command()
         previous_ns, self._last_tick_stamp = self._last_tick_stamp, stamp_ns
@@ -797,7 +807,10 @@ class MpcNode(MpcParameters, Node):
                 level = DiagnosticStatus.WARN
                 message = (f"prepare misses in {self._misses_text()}: whole ticks, no "
                            "state within feedback_tolerance of the tick times")
-            fallen = self._fallen(plan.q[:7, 0])
+            # the measured base: a prepared plan's node 0 closes on a measured state over
+            # ticks (a 1 rad roll was OK for 21 ticks, upside down for 8)
+            fallen = self._fallen(plan.q[:7, 0] if self.measured_base is None
+                                  else self.measured_base)
             if fallen:
                 level, message = DiagnosticStatus.ERROR, fallen
                 self._warn("fallen", fallen)
@@ -834,8 +847,8 @@ class MpcNode(MpcParameters, Node):
         self._pub_diag.publish(self._diag.filled(stamp_ns, level, message, values))
 
     def _fallen(self, base: np.ndarray) -> str:
-        """Why the measured base pose ``base`` (x, y, z, quaternion x, y, z, w; a plan's
-        node 0) is a fallen robot's (below FALLEN_HEIGHT of its nominal height above the
+        """Why the measured base pose ``base`` (x, y, z, quaternion x, y, z, w) is a fallen
+        robot's (below FALLEN_HEIGHT of its nominal height above the
         ground, or tilted more than FALLEN_TILT), or '' if it is not."""
         _, _, z, qx, qy = base[:5].tolist()
         height, nominal = z - self.mpc.ground_height, self.mpc.base_height_above_ground
