@@ -897,18 +897,27 @@ def test_the_walk_with_a_gait_that_never_lifts_a_foot_is_summarised(tmp_path, ca
     assert f"WARNING: the walk's mean velocity (vx, vy, wz) {mean} is" in printed, printed
 
 
-def test_a_walk_far_from_its_velocity_reference_is_warned_about():
-    from horizon_mpc.motions.cli import velocity_warning
+def test_a_walk_far_from_its_velocity_reference_or_skimming_the_ground_is_warned_about():
+    """Both were 'solved' without a word (auditors: the gait stand asked for 0.3 m/s; a new
+    robot's walk with swing apexes of 0.45 mm for a 4 cm step height)."""
+    from horizon_mpc.motions.cli import walk_warnings
 
-    walk = {"velocity_reference": [0.3, 0.0, 0.0], "mean_velocity": [0.29, 0.01, 0.0]}
-    assert velocity_warning({**walk, "velocity_error": 0.047}) is None
-    assert velocity_warning({**walk, "velocity_error": 0.5}) == (
+    walk = {"velocity_reference": [0.3, 0.0, 0.0], "mean_velocity": [0.29, 0.01, 0.0],
+            "swing_apex": [0.05, 0.07], "step_height": 0.07}
+    assert walk_warnings({**walk, "velocity_error": 0.047}) == []
+    assert walk_warnings({**walk, "velocity_error": 0.5}) == [
         "the walk's mean velocity (vx, vy, wz) [0.29, 0.01, 0.0] is 50% off its reference "
-        "[0.3, 0.0, 0.0]: the motion is consistent, but does not follow the command")
+        "[0.3, 0.0, 0.0]: the motion is consistent, but does not follow the command"]
     standing = {"velocity_reference": [0.0, 0.0, 0.0], "mean_velocity": [0.25, 0.0, 0.0],
                 "velocity_error": 0.25}
-    assert "0.250 m/s for a zero reference" in velocity_warning(standing)
-    assert velocity_warning({"final_yaw": 1.57}) is None  # a leap, a turn
+    assert "0.250 m/s for a zero reference" in walk_warnings(standing)[0]
+    skim = {**walk, "velocity_error": 0.04, "swing_apex": [0.00015, 0.00045],
+            "step_height": 0.04}
+    assert walk_warnings(skim) == [
+        "the swing feet rise at most 0.04 cm for a step_height of 4.00 cm: they skim the "
+        "ground (the clearance is a cost: mpc.weights.swing_height against the others)"]
+    assert walk_warnings({**skim, "step_height": 0.0}) == []  # asked for (feet slide)
+    assert walk_warnings({"final_yaw": 1.57}) == []  # a leap, a turn
 
 
 def test_verbose_prints_the_solvers_iterations_as_they_go(tmp_path, capsys):

@@ -318,8 +318,7 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
         print(f"  WARNING: the plan's torques reach {ratio:.3g} times the URDF effort limits "
               f"(torque_limit_scale {getattr(settings, 'torque_limit_scale', None)}): more than "
               "the robot's motors are rated for")
-    warning = velocity_warning(res.summary)
-    if warning:
+    for warning in walk_warnings(res.summary):
         print(f"  WARNING: {warning}")
     if "pybullet_replay" in extra:
         print(f"  pybullet_replay: {extra['pybullet_replay']}")
@@ -342,21 +341,33 @@ TORQUE_RATIO_TOLERANCE = 1e-3
 #: a walk's ``velocity_error`` (relative; m/s for a zero reference) that is warned about:
 #: the shipped walks are within 0.6-12 %
 VELOCITY_ERROR_WARNING = 0.2
+#: the share of the gait's step height under which a walk's highest swing apex is warned
+#: about (the clearance is a cost: go2's walk lifts its feet 1.9-3.5 cm for its 7 cm,
+#: doc/motions.md)
+SWING_APEX_WARNING = 0.2
 
 
-def velocity_warning(summary: dict) -> str | None:
-    """What to say of a walk whose mean velocity is more than
-    :data:`VELOCITY_ERROR_WARNING` off its reference (None: nothing, or not a walk): its
-    success is the problem's (converged, physically consistent), not the command's."""
+def walk_warnings(summary: dict) -> list[str]:
+    """What to say of a walk (nothing for the other motions) whose success is the
+    problem's (converged, physically consistent) but not what was asked: a mean velocity
+    more than :data:`VELOCITY_ERROR_WARNING` off its reference, swing feet that rise less
+    than :data:`SWING_APEX_WARNING` of the gait's step height (they skim the ground)."""
+    out = []
     error = summary.get("velocity_error")
-    if not isinstance(error, float) or error <= VELOCITY_ERROR_WARNING:
-        return None
-    reference = summary["velocity_reference"]
-    mean = [round(x, 3) for x in summary["mean_velocity"]]
-    off = (f"{error:.0%} off its reference" if any(reference) else
-           f"{error:.3f} m/s for a zero reference")
-    return (f"the walk's mean velocity (vx, vy, wz) {mean} is {off} {reference}: the motion "
-            "is consistent, but does not follow the command")
+    if isinstance(error, float) and error > VELOCITY_ERROR_WARNING:
+        reference = summary["velocity_reference"]
+        mean = [round(x, 3) for x in summary["mean_velocity"]]
+        off = (f"{error:.0%} off its reference" if any(reference) else
+               f"{error:.3f} m/s for a zero reference")
+        out.append(f"the walk's mean velocity (vx, vy, wz) {mean} is {off} {reference}: the "
+                   "motion is consistent, but does not follow the command")
+    apex, height = summary.get("swing_apex"), summary.get("step_height")
+    if apex and isinstance(height, float) and height > 0 \
+            and apex[1] < SWING_APEX_WARNING * height:
+        out.append(f"the swing feet rise at most {apex[1] * 100:.2f} cm for a step_height of "
+                   f"{height * 100:.2f} cm: they skim the ground (the clearance is a cost: "
+                   "mpc.weights.swing_height against the others)")
+    return out
 
 
 def _replay_warning(rep: dict) -> str:
