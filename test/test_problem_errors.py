@@ -26,6 +26,18 @@ def test_bounds_of_wrong_dimension_name_the_variable(prb):
         prb.get_variable("x").set_bounds([0, 0, 0], [1, 1, 1])
 
 
+def test_bounds_and_guesses_that_are_not_numbers_name_the_variable(prb):
+    """numpy's own message named neither the variable nor the bound ('could not convert
+    string to float', 'inhomogeneous shape'; an auditor)."""
+    x = prb.get_variable("x")
+    with pytest.raises(ValueError, match=r"lower bound of 'x': 'a' is not a number"):
+        x.set_bounds("a", 1)
+    with pytest.raises(ValueError, match=r"upper bound of 'x': \[\[1, 2\], \[3\]\] is not"):
+        x.set_bounds(0, [[1, 2], [3]])
+    with pytest.raises(ValueError, match=r"initial guess of 'u': 'zz' is not a number"):
+        prb.get_variable("u").set_initial_guess("zz")
+
+
 def test_initial_guess_of_wrong_node_count_is_refused(prb):
     with pytest.raises(ValueError, match="initial guess of 'u'"):
         prb.get_variable("u").set_initial_guess(np.zeros((1, 11)))  # inputs live on 10 nodes

@@ -98,13 +98,26 @@ def _node_index(n: object, what: str) -> int:
     return int(n)
 
 
+def float_array(value, what: str = "") -> np.ndarray:
+    """``value`` as a float array; a ``ValueError`` naming ``what`` when it is not numbers
+    (text, a ragged list: numpy's own message named neither the variable nor the bound)."""
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        shown = repr(value)
+        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        raise ValueError(f"{what}: {shown} is not a number or an array of numbers "
+                         f"({exc})") from None
+
+
 def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:
     """Broadcast a scalar, a (dim,) vector or a (dim, n_sel) array to shape (dim, n_sel).
 
     Raises:
-        ValueError: the shape fits none of those (the message names ``what``).
+        ValueError: the shape fits none of those, or not numbers (the message names
+            ``what``).
     """
-    arr = np.asarray(value, dtype=float)
+    arr = float_array(value, what)
     if arr.ndim == 0:
         return np.full((dim, n_sel), float(arr))
     if arr.ndim == 1 and arr.shape[0] == dim:

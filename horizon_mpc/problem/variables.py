@@ -21,6 +21,7 @@ from horizon_mpc.problem.nodes import (
     bound_values,
     broadcast_values,
     check_bounds,
+    float_array,
     holds_none,
     select_nodes,
 )
@@ -95,7 +96,7 @@ class Variable(cs.SX):
         # numpy takes None as NaN: caught only at the solve (a bound's None is no bound)
         if value is None or (isinstance(value, (list, tuple)) and holds_none(value)):
             raise TypeError(f"{what} of {self.name!r} is or holds None; give numbers")
-        arr = np.asarray(value, dtype=float)
+        arr = float_array(value, f"{what} of {self.name!r}")
         if arr.ndim == 1 and arr.shape[0] == self.dim:
             arr = arr[:, None]
         elif not (arr.ndim == 0 or (arr.ndim == 2 and arr.shape[0] == self.dim
