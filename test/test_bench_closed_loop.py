@@ -153,14 +153,14 @@ def test_a_tiny_realtime_run_brings_the_mpc_process_figures_back(tmp_path):
 def test_a_runs_tick_is_compared_with_the_peer_rounds_around_it():
     """With a peer round before every run and after the last, a run's ratio uses the two
     rounds around it; the ratio against every round is kept beside it."""
-    croc = {"ms_per_iteration": 10.0, "cpu_ms_per_iteration": 10.0,
+    croc = {"ms_per_iteration": 10.0, "cpu_ms_per_iteration": 10.0, "same_run": True,
             "rounds": [{"ms_per_iteration": 8.0}, {"ms_per_iteration": 12.0},
                        {"ms_per_iteration": 14.0}],
             "adjacent_rounds": {"go2": [0, 1], "go2_r2": [1, 2]}}
     assert bench.adjacent_crocoddyl_ms(croc, "go2") == 10.0
     assert bench.adjacent_crocoddyl_ms(croc, "go2_r2") == 13.0
     assert bench.adjacent_crocoddyl_ms(croc, "solo12") is None
-    run = {"run": "go2_r2", "robot": "go2", "tick_ms": {"median": 3.9},
+    run = {"run": "go2_r2", "robot": "go2", "mode": "realtime", "tick_ms": {"median": 3.9},
            "tick_cpu_ms": {"median": 3.8}, "p99_over_median": 1.5,
            "memory_mb": {"peak": 200.0}, "segments": [], "real_time_factor": 1.0,
            "control_periods": {"rate_hz": 50.0}, "deadline_misses": {"percent": 0.0}}
@@ -174,15 +174,33 @@ def test_a_runs_tick_is_compared_with_the_peer_rounds_around_it():
     assert m["over_crocoddyl_iteration"] == pytest.approx(0.39) and m["met"] is False
 
 
+def test_a_lockstep_tick_or_an_earlier_runs_peer_is_not_rated_against_the_target():
+    """Both were 'met': true (a lockstep tick of 3.1 ms in session 29's file; a run without
+    --peer against the ilqr.json of an earlier commit), while the README said not met."""
+    croc = {"ms_per_iteration": 12.0, "cpu_ms_per_iteration": 12.0, "same_run": True,
+            "rounds": [{"ms_per_iteration": 12.0}, {"ms_per_iteration": 12.0}],
+            "adjacent_rounds": {"go2_lockstep": [0, 1]}}
+    run = {"run": "go2_lockstep", "robot": "go2", "mode": "lockstep",
+           "tick_ms": {"median": 3.0}, "tick_cpu_ms": {"median": 3.0}, "p99_over_median": 1.5,
+           "memory_mb": {"peak": 200.0}, "segments": [], "real_time_factor": 1.0,
+           "control_periods": {"rate_hz": 50.0}, "deadline_misses": {"percent": 0.0}}
+    m = bench.targets_status(run, croc)["median_tick_ms"]
+    assert m["met"] is None and m["not_rated"] == "a lockstep tick is no real-time figure"
+    assert m["over_crocoddyl_iteration"] == pytest.approx(0.25)  # the ratio stays, as context
+    earlier = {"ms_per_iteration": 12.0, "same_run": False, "source": "bench/results/ilqr.json"}
+    m = bench.targets_status({**run, "run": "go2", "mode": "realtime"}, earlier)["median_tick_ms"]
+    assert m["met"] is None and "not measured in this run" in m["not_rated"]
+
+
 def test_the_paced_peer_tick_is_context_beside_the_target_not_the_target():
     """Crocoddyl's warm tick paced at the control rate gives a second ratio; the target
     stays the one against its per-iteration time."""
-    croc = {"ms_per_iteration": 6.0, "cpu_ms_per_iteration": 6.0,
+    croc = {"ms_per_iteration": 6.0, "cpu_ms_per_iteration": 6.0, "same_run": True,
             "rounds": [{"ms_per_iteration": 6.0, "paced_tick_ms": 9.0},
                        {"ms_per_iteration": 6.0, "paced_tick_ms": 11.0}],
             "adjacent_rounds": {"go2": [0, 1]}}
     assert bench.adjacent_crocoddyl_ms(croc, "go2", "paced_tick_ms") == 10.0
-    run = {"run": "go2", "robot": "go2", "tick_ms": {"median": 3.0},
+    run = {"run": "go2", "robot": "go2", "mode": "realtime", "tick_ms": {"median": 3.0},
            "tick_cpu_ms": {"median": 3.0}, "p99_over_median": 1.5,
            "memory_mb": {"peak": 200.0}, "segments": [], "real_time_factor": 1.0,
            "control_periods": {"rate_hz": 50.0}, "deadline_misses": {"percent": 0.0}}
