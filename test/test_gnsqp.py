@@ -93,6 +93,22 @@ def test_max_iter_stops_with_failure():
     assert solver.stats.status == "max_iter reached" and solver.stats.iterations == 3
 
 
+@pytest.mark.parametrize("budget, status", [(60.0, "converged"), (1e-9, "time budget")])
+def test_a_time_budget_never_starts_a_step_it_cannot_finish(budget, status):
+    """As the ILQR's option (the GN-SQP had none: a turn ran minutes with no way to cap
+    it); the first step always runs, and the stats are of the point returned."""
+    prb, _ = build_cartpole()
+    solver = make_solver("gnsqp", prb, {"time_budget": budget})
+    assert solver.solve() is (status == "converged")
+    assert solver.stats.status == status
+    if budget < 1:
+        assert solver.stats.iterations == 1  # one step taken, the second not started
+        last = solver.stats.history[-1]
+        assert (last["iteration"], solver.stats.cost) == (1, last["cost"])
+    with pytest.raises(ValueError, match="time_budget"):
+        make_solver("gnsqp", prb, {"time_budget": 0.0})
+
+
 def test_warm_resolve_after_convergence_takes_no_step():
     prb, _ = build_cartpole(50)
     solver = make_solver("gnsqp", prb, {"max_iter": 300})

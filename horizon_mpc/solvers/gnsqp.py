@@ -50,6 +50,9 @@ Options (``make_solver('gnsqp', prb, opts)``):
 ``elastic_penalty`` 1e4        l1 penalty of the elastic QP's slacks (at least ``mu``)
 ``sym``             'SX'       graph type of the transcription ('SX' or 'MX')
 ``constraint_rows`` 'valid'    'valid' or 'active' (see ``Transcription``)
+``time_budget``     None       s per call: an iteration is not started when the last
+                               one's duration would take the call past it (the first
+                               always runs; status ``'time budget'``), as the ILQR's
 =================== ========== ========================================================
 """
 
@@ -112,11 +115,11 @@ class GnSqpSolver(NlpSolver):
         "max_iter": 300, "tol": 1e-6, "tol_constr": 1e-8, "tol_step": 1e-10,
         "qp_solver": "qrqp", "qp_options": {}, "regularization": 1e-8, "armijo": 1e-4,
         "min_step": 1e-8, "sym": "SX", "constraint_rows": "valid", "nonmonotone": 3,
-        "elastic_penalty": 1e4,
+        "elastic_penalty": 1e4, "time_budget": None,
     }
     RANGES = {"max_iter": ">=1", "tol": ">=0", "tol_constr": ">=0", "tol_step": ">=0",
               "regularization": ">=0", "armijo": "(0,1)", "min_step": ">0",
-              "nonmonotone": ">=1", "elastic_penalty": ">0"}
+              "nonmonotone": ">=1", "elastic_penalty": ">0", "time_budget": ">0"}
 
     def __init__(self, prb: Problem, opts: dict[str, Any] | None = None):
         super().__init__(prb, opts)
@@ -264,6 +267,7 @@ class GnSqpSolver(NlpSolver):
         timing = {"linearize": 0.0, "qp": 0.0, "line_search": 0.0}
         t0 = time.perf_counter()
         it = 0
+        t_iter = t0
         for it in range(o["max_iter"] + 1):
             tic = time.perf_counter()
             H, grad, f, g, J, stat = self._linearize(w, p, o["regularization"], lam_g, lam_x)
@@ -296,7 +300,14 @@ class GnSqpSolver(NlpSolver):
                 break
             if it == o["max_iter"]:
                 break
+            # never start a step that would not end within the budget (its cost estimated
+            # by the last one's; a GN-SQP turn took minutes with no way to cap it)
             tic = time.perf_counter()
+            if it > 0 and o["time_budget"] is not None and (
+                    2 * tic - t_iter - t0 > o["time_budget"]):
+                status = "time budget"
+                break
+            t_iter = tic
             res = self._step(H, grad, J, g, w, lbx, ubx, lbg, ubg, lam_g, lam_x, mu)
             timing["qp"] += time.perf_counter() - tic
             if res is None:
