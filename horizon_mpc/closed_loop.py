@@ -171,6 +171,13 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
     segments = list(segments or load_profile(DEFAULT_PROFILE))
     if duration is None:
         duration = sum(s.duration for s in segments)
+    # the CLI's checks, for a call from Python too (a NaN duration never ended; a misspelt
+    # parameter ran the default without a word)
+    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration must be a finite number of seconds > 0, got {duration!r}")
+    if iterations is not None and not (isinstance(iterations, int) and iterations >= 1):
+        raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
+    check_mpc_parameter_names(list(mpc_parameters or {}), "mpc_parameters: ")
     if mode not in ("lockstep", "realtime"):
         raise ValueError(f"mode must be 'lockstep' or 'realtime', got {mode!r}")
     cfg = load_robot_config(robot)  # an unknown robot fails here, before any node or process
@@ -733,6 +740,18 @@ def run_domain_id(mode: str, domain_id: int | None = None) -> int:
 _HARNESS_PARAMETERS = (*MODEL_PARAMETERS, "trigger", "use_sim_time")
 
 
+def check_mpc_parameter_names(names: Sequence[str], prefix: str = "") -> None:
+    """``ValueError`` for a name that is no ``mpc_node`` parameter or one the closed loop
+    sets itself (the robot, the mode's trigger and clock)."""
+    known = parameter_names()
+    for name in names:
+        if name in _HARNESS_PARAMETERS:
+            raise ValueError(f"{prefix}{name}: set by the closed loop itself (robot, mode)")
+        if name not in known:
+            raise ValueError(f"{prefix}{name}: mpc_node has no such parameter; it has "
+                             f"{', '.join(n for n in known if n not in _HARNESS_PARAMETERS)}")
+
+
 def _sim_parameters(args: argparse.Namespace) -> dict[str, object]:
     """The ``--sim-param NAME=VALUE`` settings, typed, or ValueError naming the bad one (the
     simulator checks that the delays fit in the control period)."""
@@ -783,17 +802,12 @@ def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, li
     late = [p.time for p in pushes if p.time >= end]
     if late:
         raise ValueError(f"push time(s) {late} s at or after the end of the run ({end:g} s)")
-    known = parameter_names()
     params = {}
     for item in args.mpc_param:
         name, sep, value = item.partition("=")
         if not sep or not name:
             raise ValueError(f"--mpc-param needs NAME=VALUE, got {item!r}")
-        if name in _HARNESS_PARAMETERS:
-            raise ValueError(f"-p {name}: set by the closed loop itself (--robot, the mode)")
-        if name not in known:
-            raise ValueError(f"-p {name}: mpc_node has no such parameter; it has "
-                             f"{', '.join(n for n in known if n not in _HARNESS_PARAMETERS)}")
+        check_mpc_parameter_names([name], "-p ")
         try:
             params[name] = parse_yaml(value)
         except yaml.YAMLError as exc:

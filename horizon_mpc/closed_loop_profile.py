@@ -35,21 +35,50 @@ def profile_file(name_or_path: str | Path) -> Path:
 
 @dataclass
 class Segment:
-    """A constant command ``(vx, vy, wz)`` (base frame) held for ``duration`` s."""
+    """A constant command ``(vx, vy, wz)`` (base frame) held for ``duration`` s.
+
+    Raises:
+        ValueError: a duration that is not a finite number > 0, a command that is not
+            finite or beyond :data:`MAX_COMMAND` (a negative duration ran 1 tick without
+            a word when given from Python).
+    """
 
     duration: float
     vx: float = 0.0
     vy: float = 0.0
     wz: float = 0.0
 
+    def __post_init__(self) -> None:
+        values = {k: _number(getattr(self, k), k) for k in ("duration", "vx", "vy", "wz")}
+        if not values["duration"] > 0:
+            raise ValueError(f"non-positive duration {self.duration}")
+        fast = {k: v for k, v in values.items() if k != "duration" and abs(v) > MAX_COMMAND}
+        if fast:
+            raise ValueError(f"{fast} beyond {MAX_COMMAND:g} (m/s, rad/s), which the MPC node "
+                             "rejects as garbage")
+
 
 @dataclass
 class Push:
-    """A world-frame ``force`` (N) on the base for ``duration`` s from sim time ``time``."""
+    """A world-frame ``force`` (N) on the base for ``duration`` s from sim time ``time``.
+
+    Raises:
+        ValueError: a time < 0, a duration <= 0, a force that is not 3 finite numbers or
+            beyond :data:`MAX_PUSH`.
+    """
 
     time: float
     force: tuple[float, float, float]
     duration: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.force, (list, tuple)) or len(self.force) != 3:
+            raise ValueError(f"force must be a list [fx, fy, fz], got {self.force!r}")
+        force = [_number(f, "force") for f in self.force]
+        if _number(self.time, "time") < 0 or not _number(self.duration, "duration") > 0:
+            raise ValueError("time must be >= 0 and duration > 0")
+        if max(map(abs, force)) > MAX_PUSH:
+            raise ValueError(f"force beyond {MAX_PUSH:g} N")
 
 
 #: |vx|, |vy| (m/s), |wz| (rad/s) a profile may command: the MPC node rejects faster
@@ -109,15 +138,13 @@ def load_pushes(path: str | Path) -> list[Push]:
             raise ValueError(f"{where} needs 'time', 'force' [fx, fy, fz] and optionally "
                              f"'duration', got {item!r}")
         force = item["force"]
-        if not isinstance(force, list) or len(force) != 3:
-            raise ValueError(f"{where}: force must be a list [fx, fy, fz], got {force!r}")
-        push = Push(_number(item["time"], f"{where}: time"),
-                    tuple(_number(f, f"{where}: force") for f in force),
-                    _number(item.get("duration", 0.1), f"{where}: duration"))
-        if push.time < 0 or not push.duration > 0:
-            raise ValueError(f"{where}: time must be >= 0 and duration > 0")
-        if max(map(abs, push.force)) > MAX_PUSH:
-            raise ValueError(f"{where}: force beyond {MAX_PUSH:g} N")
+        try:
+            push = Push(_number(item["time"], "time"),
+                        tuple(_number(f, "force") for f in force)
+                        if isinstance(force, list) else force,
+                        _number(item.get("duration", 0.1), "duration"))
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
         pushes.append(push)
     return pushes
 
@@ -145,15 +172,10 @@ def load_profile(path: str | Path) -> list[Segment]:
         if unknown or "duration" not in item:
             raise ValueError(f"{where} needs 'duration' and only vx/vy/wz, got "
                              f"{sorted(map(str, item))}")
-        seg = Segment(**{k: _number(v, f"{where}: {k}") for k, v in item.items()})
-        if not seg.duration > 0:
-            raise ValueError(f"{where} has non-positive duration {seg.duration}")
-        fast = {k: v for k, v in (("vx", seg.vx), ("vy", seg.vy), ("wz", seg.wz))
-                if abs(v) > MAX_COMMAND}
-        if fast:
-            raise ValueError(f"{where}: {fast} beyond {MAX_COMMAND:g} (m/s, rad/s), which the "
-                             "MPC node rejects as garbage")
-        segs.append(seg)
+        try:
+            segs.append(Segment(**{k: _number(v, k) for k, v in item.items()}))
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
     return segs
 
 

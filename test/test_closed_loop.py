@@ -85,6 +85,29 @@ def test_profile_segments_that_cannot_run_are_refused(tmp_path, text, match):
         load_profile(path)
 
 
+def test_a_run_from_python_checks_what_the_cli_checks():
+    """run() from Python: a NaN duration never ended, a misspelt mpc parameter ran the
+    default without a word, a negative segment ran 1 tick (an auditor of the API)."""
+    for kwargs, match in (({"duration": float("nan")}, "duration must be a finite"),
+                          ({"duration": -1.0}, "duration must be a finite"),
+                          ({"iterations": 0}, "iterations must be an integer >= 1"),
+                          ({"mpc_parameters": {"n_nodez": 3}},
+                           "mpc_parameters: n_nodez: mpc_node has no such parameter"),
+                          ({"mpc_parameters": {"trigger": "timer"}},
+                           "set by the closed loop itself")):
+        with pytest.raises(ValueError, match=match):
+            run("go2", [Segment(0.5)], gif=False, **kwargs)
+    for args, match in (((-1.0, 0.2), "non-positive duration"),
+                        ((1.0, float("nan")), "vx must be finite"),
+                        ((1.0, 0.0, 50.0), "beyond 10")):
+        with pytest.raises(ValueError, match=match):
+            Segment(*args)
+    with pytest.raises(ValueError, match="time must be >= 0"):
+        Push(-1.0, (1.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="force must be a list"):
+        Push(1.0, (1.0, 0.0))
+
+
 @pytest.mark.parametrize("push, match", [
     ("{time: 0.5, force: '123'}", r"force must be a list"),            # read as (1, 2, 3)
     ("{time: .nan, force: [1, 0, 0]}", "time must be finite"),         # never applied
