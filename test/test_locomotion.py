@@ -847,3 +847,31 @@ def test_successive_ticks_agree_on_the_contacts_of_the_nodes_they_share():
     walk = make_gait("walk", 0.3)
     np.testing.assert_array_equal(walk.schedule(0.37, 24, 0.02).stance,
                                   walk.schedule(0.37 + walk.period, 24, 0.02).stance)
+
+
+def test_add_contacts_checks_everything_before_it_builds_a_term():
+    """A wrong foot name raised after the feet before it and swing_z were in the problem
+    (variables cannot be removed: the next call said 'swing_z already exists'); a force
+    of the wrong size failed in CasADi's slice assertion; a negative mu made a cone that
+    allows no force (an auditor of the API)."""
+    from horizon_mpc.locomotion.formulation import add_contacts, floating_base_double_integrator
+    from horizon_mpc.model import RobotModel, UnknownNameError
+    from horizon_mpc.problem import Problem
+
+    m = RobotModel.from_example("solo12")
+    prb = Problem(3)
+    q = prb.create_state_variable("q", m.nq)
+    v = prb.create_state_variable("v", m.nv)
+    prb.create_input_variable("a", m.nv)
+    f = prb.create_input_variable("f", 6)
+    with pytest.raises(UnknownNameError, match="nope"):
+        add_contacts(prb, m, ["FL_FOOT", "nope"], q, v, f, 0.6)
+    for feet, mu, match in ((["FL_FOOT", "FR_FOOT", "HL_FOOT"], 0.6, "f has 6 rows; 3 feet"),
+                            (["FL_FOOT", "FL_FOOT"], 0.6, "distinct frame names"),
+                            (["FL_FOOT", "FR_FOOT"], -0.6, "mu must be a finite number > 0")):
+        with pytest.raises(ValueError, match=match):
+            add_contacts(prb, m, feet, q, v, f, mu)
+    terms = add_contacts(prb, m, ["FL_FOOT", "FR_FOOT"], q, v, f, 0.6)  # nothing was left
+    assert sorted(terms.velocity) == ["FL_FOOT", "FR_FOOT"]
+    with pytest.raises(ValueError, match="a has 6 rows; the model needs 18"):
+        floating_base_double_integrator(m, q, v, f)

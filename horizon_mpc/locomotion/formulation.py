@@ -7,6 +7,7 @@ Conventions: ``doc/model.md``; node conventions: ``doc/problem.md``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import casadi as cs
@@ -31,6 +32,9 @@ def floating_base_double_integrator(model: RobotModel, q, v, a) -> cs.SX:
     Declares ``q``'s manifold (Lie-group integrate/difference of the model) so that every
     integrator keeps the quaternion unit norm. Returns the tangent derivative ``[v; a]``.
     """
+    for name, x, size in (("q", q, model.nq), ("v", v, model.nv), ("a", a, model.nv)):
+        if x.shape[0] != size:  # [v; f] of a wrong-size input was returned without a word
+            raise ValueError(f"{name} has {x.shape[0]} rows; the model needs {size}")
     q.set_manifold(model.integrate(), model.difference(), model.nv)
     return cs.vertcat(v, a)
 
@@ -107,6 +111,20 @@ def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q, v, f, mu: 
     terms = ContactTerms()
     if clearance not in (None, "constraint", "cost"):
         raise ValueError(f"clearance must be 'constraint', 'cost' or None, got {clearance!r}")
+    # everything checked before the first term is made: a wrong foot name used to leave the
+    # feet before it, and swing_z, in the problem (variables cannot be removed)
+    if isinstance(feet, str) or not feet or len(set(feet)) != len(feet):
+        raise ValueError(f"feet must be a non-empty list of distinct frame names, got {feet!r}")
+    for foot in feet:
+        model.frame_id(foot)  # UnknownNameError naming the frame and the valid ones
+    if f.shape[0] != 3 * len(feet):
+        raise ValueError(f"f has {f.shape[0]} rows; {len(feet)} feet need {3 * len(feet)} "
+                         "(a force in world axes per foot)")
+    for name, value, positive in (("mu", mu, True), ("foot_radius", foot_radius, False),
+                                  ("clearance_weight", clearance_weight, False)):
+        if not (math.isfinite(value) and (value > 0 if positive else value >= 0)):
+            raise ValueError(f"{name} must be a finite number {'>' if positive else '>='} 0, "
+                             f"got {value!r}")
     swing_z = prb.create_parameter("swing_z", len(feet)) if clearance else None
     terms.swing_z = swing_z
     cone = np.array([[1.0, 0.0, mu], [-1.0, 0.0, mu], [0.0, 1.0, mu], [0.0, -1.0, mu],
