@@ -875,3 +875,19 @@ def test_add_contacts_checks_everything_before_it_builds_a_term():
     assert sorted(terms.velocity) == ["FL_FOOT", "FR_FOOT"]
     with pytest.raises(ValueError, match="a has 6 rows; the model needs 18"):
         floating_base_double_integrator(m, q, v, f)
+
+
+def test_start_refuses_a_bad_max_iter_before_it_changes_anything(walking_mpc):
+    """start(max_iter=0) failed in the solver after the controller had reset its warm start
+    and left the ILQR out of its real-time mode; set_stand_when_idle('false') stored True."""
+    from horizon_mpc.posture import standing_configuration
+
+    _, q = standing_configuration(walking_mpc.cfg)
+    walking_mpc.start(q, np.zeros(walking_mpc.model.nv), 0.0)
+    rti, t_last = walking_mpc.solver.opts["rti"], walking_mpc.t_last
+    with pytest.raises(ValueError, match="max_iter must be an integer >= 1, got 0"):
+        walking_mpc.start(q, np.zeros(walking_mpc.model.nv), 5.0, max_iter=0)
+    assert (walking_mpc.solver.opts["rti"], walking_mpc.t_last) == (rti, t_last) == (True, 0.0)
+    with pytest.raises(TypeError, match="True or False"):
+        walking_mpc.set_stand_when_idle("false")
+    assert walking_mpc.scheduler.stand_when_idle is True

@@ -445,3 +445,18 @@ def test_efforts_beyond_the_limits_are_said_to_be_clipped(go2):
     assert note.startswith("efforts beyond the effort limits are clipped to them: "
                            f"{go2.joint_names[2]} 5e+06 (limit ")
     assert "1 joint(s) over" in note
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"dt": float("inf")}, "dt must be a finite number > 0"),
+    ({"friction": float("nan")}, "friction must be a finite number >= 0"),
+    ({"friction": -1.0}, "friction must be a finite number >= 0"),
+    ({"trajectory_timeout": -1.0}, "trajectory_timeout must be a finite number > 0"),
+    ({"max_stamp_offset": -1.0}, "max_stamp_offset must be a finite number > 0"),
+    ({"base_pose": (1.0, 2.0)}, r"base_pose must be \(x, y, yaw\)"),
+])
+def test_simulator_arguments_that_cannot_run_are_refused_by_name(kwargs, match):
+    """dt inf read 'time inf' and a NaN base, a negative time-out refused every trajectory,
+    a NaN friction was taken, a 2-number pose was 'not enough values to unpack'."""
+    with pytest.raises(ValueError, match=match):
+        Simulator("go2", **kwargs)

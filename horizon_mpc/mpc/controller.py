@@ -167,11 +167,16 @@ class WalkingMpc:
         """Bootstrap: solve the standing problem at the measured state to convergence.
 
         Raises:
-            ValueError: a state of the wrong shape or not finite, or a time not finite
-                (nothing changed).
+            ValueError: a state of the wrong shape or not finite, a time not finite, or a
+                ``max_iter`` < 1 (nothing changed).
         """
         wp = self.wp
         q, v = self._checked_state(t, q, v)
+        if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) \
+                or max_iter < 1:
+            # (the solver refused it after the controller had reset its warm start and left
+            # the ILQR out of its real-time mode)
+            raise ValueError(f"start(): max_iter must be an integer >= 1, got {max_iter!r}")
         fk = [self.model.fk(foot) for foot in wp.feet]
         self.ground_z = np.array([float(fn(q)[0][2]) for fn in fk])
         # feet frames may sit above the ground (foot radius): keep the height above them
@@ -624,6 +629,8 @@ class WalkingMpc:
     def set_stand_when_idle(self, stand: bool) -> None:
         """With a zero command, keep the feet down (True) or keep the gait stepping in place
         (False); takes effect at the next tick."""
+        if not isinstance(stand, (bool, np.bool_)):  # bool("false") is True
+            raise TypeError(f"stand_when_idle must be True or False, got {stand!r}")
         self.settings.stand_when_idle = self.scheduler.stand_when_idle = bool(stand)
 
 

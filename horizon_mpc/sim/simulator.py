@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -131,8 +132,23 @@ class Simulator:
             cfg = dataclasses.replace(cfg, urdf_path=str(urdf_path))
         self.cfg = cfg
         self.dt = float(dt) if dt is not None else 1.0 / cfg.sim.physics_rate
-        if not self.dt > 0:
-            raise ValueError(f"dt must be positive, got {dt}")
+        # each checked before anything is built (dt inf read 'time inf', a negative time-out
+        # refused every trajectory, a NaN friction was taken)
+        if not (math.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"dt must be a finite number > 0, got {dt}")
+        for name, value, low in (("friction", friction, 0.0),
+                                 ("trajectory_timeout", trajectory_timeout, None),
+                                 ("max_stamp_offset", max_stamp_offset, None)):
+            if value is not None and not (
+                    isinstance(value, (int, float, np.floating)) and not isinstance(value, bool)
+                    and math.isfinite(value) and (value >= low if low is not None else value > 0)):
+                raise ValueError(f"{name} must be a finite number "
+                                 f"{'>= 0' if low is not None else '> 0'}, got {value!r}")
+        if base_pose is not None and not (
+                np.shape(base_pose) == (3,) and np.all(np.isfinite(np.asarray(base_pose,
+                                                                               float)))):
+            raise ValueError(f"base_pose must be (x, y, yaw), 3 finite numbers, got "
+                             f"{base_pose!r}")
         self.max_stamp_offset = max_stamp_offset
         self.model, q_stand = standing_configuration(cfg)
         self._check_model()
