@@ -319,3 +319,9 @@ def test_an_empty_urdf_string_is_named_as_such():
     for empty in ("", "  \n"):
         with pytest.raises(ValueError, match="no URDF: an empty string"):
             RobotModel.from_urdf(empty)
+
+
+def test_a_robot_name_given_to_the_constructor_points_to_from_example():
+    """RobotModel('go2') was "'str' object has no attribute 'armature'"."""
+    with pytest.raises(TypeError, match=r"use RobotModel.from_example\(name\)"):
+        RobotModel("go2")

@@ -36,6 +36,8 @@ def test_bounds_and_guesses_that_are_not_numbers_name_the_variable(prb):
         x.set_bounds(0, [[1, 2], [3]])
     with pytest.raises(ValueError, match=r"initial guess of 'u': 'zz' is not a number"):
         prb.get_variable("u").set_initial_guess("zz")
+    with pytest.raises(ValueError, match=r"weight of cost 'effort': 'a' is not a number"):
+        prb.create_cost("effort", prb.get_variable("u"), weight="a")
 
 
 def test_initial_guess_of_wrong_node_count_is_refused(prb):

@@ -87,6 +87,9 @@ class RobotModel(SymbolicFunctions):
     def __init__(
         self, pin_model: pin.Model, name: str | None = None, srdf: str | Path | None = None
     ) -> None:
+        if not isinstance(pin_model, pin.Model):  # RobotModel("go2"): 'no attribute armature'
+            raise TypeError(f"RobotModel takes a pinocchio.Model, got {pin_model!r}: use "
+                            "RobotModel.from_example(name) or RobotModel.from_urdf(path)")
         armature = np.asarray(pin_model.armature, dtype=float)
         if np.any(armature != 0.0):
             # Pinocchio's crba/rnea/aba add it; the symbolic dynamics here do not

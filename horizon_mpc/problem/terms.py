@@ -22,6 +22,7 @@ from horizon_mpc.problem.nodes import (
     Values,
     bound_values,
     check_bounds,
+    float_array,
     select_nodes,
 )
 
@@ -187,7 +188,7 @@ class Cost(Term):
 
     def set_weight(self, weight: Values) -> None:
         """Set the weight: a scalar or one non-negative value per residual row."""
-        w = np.asarray(weight, dtype=float)
+        w = float_array(weight, f"weight of cost {self.name!r}")
         w = np.full(self.dim, float(w)) if w.ndim == 0 else w.reshape(-1)
         if w.shape != (self.dim,):
             raise ValueError(f"weight of cost {self.name!r}: expected a scalar or "
