@@ -496,6 +496,12 @@ def test_diagnostics_say_error_when_the_measured_base_is_a_fallen_robots(context
             assert status.message.startswith("the robot seems to have fallen") and \
                 what in status.message
             assert warned[-1] == status.message
+        # nominal above the ground, as the closed loop's fall test (a sphere foot's frame
+        # sits its radius up: the node said 0.312 m for go2, the closed loop 0.336)
+        _, q = standing_configuration(node.mpc.cfg)  # feet frames at z = 0
+        grounded = q[2] + node.mpc.cfg.foot_radius
+        assert f"(nominal {grounded:.3f} m)" in status.message
+        assert grounded == pytest.approx(0.336, abs=1e-3)
         node.measured_base = standing
         node._publish_diagnostics(node.plan, 12 * NS_PER_S)  # standing again
         assert node._pub_diag.msgs[-1].status[0].level == DiagnosticStatus.OK

@@ -851,7 +851,11 @@ class MpcNode(MpcParameters, Node):
         robot's (below FALLEN_HEIGHT of its nominal height above the
         ground, or tilted more than FALLEN_TILT), or '' if it is not."""
         _, _, z, qx, qy = base[:5].tolist()
-        height, nominal = z - self.mpc.ground_height, self.mpc.base_height_above_ground
+        # the controller's ground is the feet frames' height: a sphere foot's sits its radius
+        # above the ground (go2's nominal was 0.312 m here, 0.336 in the closed loop's test)
+        radius = self.mpc.cfg.foot_radius
+        height = z - (self.mpc.ground_height - radius)
+        nominal = self.mpc.base_height_above_ground + radius
         cos_tilt = 1.0 - 2.0 * (qx * qx + qy * qy)
         if cos_tilt < math.cos(FALLEN_TILT) or height < FALLEN_HEIGHT * nominal:
             tilt = math.acos(max(-1.0, min(1.0, cos_tilt)))
