@@ -90,7 +90,7 @@ FALLEN_HEIGHT = 0.6
 FALLEN_TILT = 0.5
 MISS_WARN_SHARE = 0.2  # prepare misses among the recent ticks beyond which the node warns
 _RECENT_STATES = 8  # joint_states / odom messages kept to pair them by stamp
-STATE_QUEUE_DEPTH = 5  # of the joint_states and odom subscriptions
+STATE_QUEUE_DEPTH = 1  # of the joint_states and odom subscriptions
 
 
 class MpcNode(MpcParameters, Node):
@@ -279,10 +279,11 @@ class MpcNode(MpcParameters, Node):
         self._pub_traj = self.create_publisher(JointTrajectory, "joint_trajectory", 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_path = self.create_publisher(Path, "~/predicted_base_path", 10)
-        # a few: another driver's JointState on the topic (a gripper's) does not displace
-        # the robot's (JointState has no key: at depth 1 each message replaced the one
-        # before it; the node lost every robot state the other's followed). Ticks plan from
-        # the state nearest their time (_state_pair), never from a backlog
+        # depth 1: a tick plans from the newest state, never from a backlog of stale ones
+        # (at depth 5 the executor took the queued states one per wait and the node planned
+        # from states 20 ms old in one of two real-time runs, session 30). The price: another
+        # driver's JointState on the topic (a gripper's) displaces the robot's (JointState
+        # has no key), which the rejection's warning names
         state_qos = QoSProfile(depth=STATE_QUEUE_DEPTH,
                                reliability=_RELIABILITY[self._p("state_reliability")])
         # best effort by default: it also hears best-effort publishers (a reliable
