@@ -1987,13 +1987,9 @@ def test_a_remapped_input_is_named_in_its_rejections(context, walking_mpc):
                    mpc=walking_mpc, context=context,
                    cli_args=["--ros-args", "-r", "joint_states:=/a/js", "-r", "odom:=/a/odom",
                              "-r", "cmd_vel:=/a/cmd"])
-    logged: list[str] = []
-
-    class Logger:
-        def warning(self, text: str) -> None:
-            logged.append(text)
-
-    node.get_logger = Logger
+    logger = _Logger()
+    logged = logger.warnings
+    node.get_logger = lambda: logger
     try:
         stamp = time_from_ns(10 * NS_PER_S)
         names = list(node.joint_names)
