@@ -891,3 +891,27 @@ def test_start_refuses_a_bad_max_iter_before_it_changes_anything(walking_mpc):
     with pytest.raises(TypeError, match="True or False"):
         walking_mpc.set_stand_when_idle("false")
     assert walking_mpc.scheduler.stand_when_idle is True
+
+
+def test_plans_schedules_and_ticks_refuse_arguments_of_the_wrong_kind(walking_mpc):
+    """An auditor of the API: tau_head(-1) was numpy's reshape error and tau_head(0)
+    CasADi's 'degenerate map'; a gait schedule of 2.5 nodes gave 4 and a NaN dt every foot
+    in swing; update('0', ...) was 'must be real number, not str'; Problem(True) was a
+    1-interval problem."""
+    from horizon_mpc.posture import standing_configuration
+    from horizon_mpc.problem import Problem
+
+    _, q = standing_configuration(walking_mpc.cfg)
+    plan = walking_mpc.start(q, np.zeros(walking_mpc.model.nv), 0.0)
+    assert plan.tau_head(1).shape == (walking_mpc.model.nv, 1)
+    for n in (0, -1, 2.5):
+        with pytest.raises(ValueError, match="n must be an integer >= 1"):
+            plan.tau_head(n)
+    gait = make_gait("trot")
+    for args in ((0.0, 2.5, 0.02), (0.0, 4, float("nan")), (0.0, 4, 0.0), (math.inf, 4, 0.02)):
+        with pytest.raises(ValueError, match="schedule: n_nodes must be an integer"):
+            gait.schedule(*args)
+    with pytest.raises(ValueError, match="time must be a finite number"):
+        walking_mpc.update("0", q, np.zeros(walking_mpc.model.nv))
+    with pytest.raises(ValueError, match="n_nodes must be an int >= 1, got True"):
+        Problem(True)

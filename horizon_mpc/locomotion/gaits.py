@@ -10,6 +10,7 @@ horizon that starts at ``t0``; shifting the horizon is sampling at a later ``t0`
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,6 +52,11 @@ class Gait:
 
     def schedule(self, t0: float, n_nodes: int, dt: float) -> ContactSchedule:
         """Contacts and swing progress on nodes ``t0 + k dt``, k = 0..n_nodes."""
+        if isinstance(n_nodes, bool) or not isinstance(n_nodes, (int, np.integer)) \
+                or n_nodes < 0 or not (math.isfinite(dt) and dt > 0) or not math.isfinite(t0):
+            # (2.5 nodes gave 4, a NaN dt every foot in swing)
+            raise ValueError(f"schedule: n_nodes must be an integer >= 0, dt > 0 and t0 "
+                             f"finite, got {n_nodes!r}, {dt!r}, {t0!r}")
         t = t0 + dt * np.arange(n_nodes + 1)
         ph = self.phases(t)
         stance = np.ones_like(ph, bool) if self.stands else ph < self.duty_factor

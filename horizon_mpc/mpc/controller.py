@@ -82,7 +82,10 @@ class Plan:
         return self._tau
 
     def tau_head(self, n: int) -> np.ndarray:
-        """``tau[:, :n]``, shape (nv, n), without computing the other nodes."""
+        """``tau[:, :n]``, shape (nv, n), without computing the other nodes (``n`` >= 1;
+        more than the plan's nodes: all of them)."""
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"tau_head: n must be an integer >= 1, got {n!r}")
         if self._tau is not None:
             return self._tau[:, :n]
         if self.inverse_dynamics is None:
@@ -452,8 +455,9 @@ class WalkingMpc:
                        ) -> tuple[np.ndarray, np.ndarray]:
         """``(q, v)`` as clean float arrays (:meth:`_clean_q`), or ValueError naming what is
         wrong: a time or a state entry not finite, a state of the wrong shape."""
-        if not math.isfinite(t):
-            raise ValueError(f"the state's time must be finite, got {t}")
+        if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(t):
+            raise ValueError(f"the state's time must be a finite number (s), got {t!r}")
         q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
         nq, nv = self.model.nq, self.model.nv
         if q.shape != (nq,) or v.shape != (nv,):

@@ -51,7 +51,8 @@ class Problem:
     """
 
     def __init__(self, n_nodes: int):
-        if not isinstance(n_nodes, (int, np.integer)) or n_nodes < 1:
+        if isinstance(n_nodes, bool) or not isinstance(n_nodes, (int, np.integer)) \
+                or n_nodes < 1:
             raise ValueError(f"n_nodes must be an int >= 1, got {n_nodes!r}")
         self.n_nodes = int(n_nodes)
         # each kind's arrays stacked (VariableGroup); the lists are the groups' own
