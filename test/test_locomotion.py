@@ -516,7 +516,7 @@ def test_a_bad_state_is_refused_before_the_controller_changes(walking_mpc):
     bad_q = q.copy()
     bad_q[8] = np.inf
     for args, match in (((0.02, bad_q, v), r"not finite at q\[8\]"),
-                        ((float("nan"), q, v), "time must be finite"),
+                        ((float("nan"), q, v), "time must be a finite number"),
                         ((0.02, q[:-1], v), "shapes"),
                         ((0.02, q, v, [0.1, 0.0]), "3 numbers"),
                         ((0.02, np.r_[q[:3], np.nan, 0.0, 0.0, 1.0, q[7:]], v),
