@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from horizon_mpc.config import find_config_file, read_yaml
-from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM, limit_command
+from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM, limit_command, ramp_time
 from horizon_mpc.nodes.mpc_inputs import ABSURD_COMMAND
 from horizon_mpc.sim.simulator import PLAUSIBLE_WRENCH
 
@@ -203,8 +203,9 @@ def with_zero_tail(segments: Sequence[Segment], duration: float | None) -> list[
 def unreached_segments(segments: Sequence[Segment], max_velocity: Sequence[float],
                        max_acceleration: Sequence[float],
                        max_command_norm: float = DEFAULT_MAX_NORM) -> list[tuple[int, float]]:
-    """The segments (index, ramp time in s) whose command the MPC's ramp (each axis at most
-    ``max_acceleration``, commands limited as the MPC does: ``max_velocity`` per axis and
+    """The segments (index, ramp time in s) whose command the MPC's ramp
+    (:func:`~horizon_mpc.locomotion.command.ramp_time` of ``max_acceleration``, commands
+    limited as the MPC does: ``max_velocity`` per axis and
     ``max_command_norm`` combined, :func:`~horizon_mpc.locomotion.command.limit_command`)
     cannot reach from the one before within the segment; the last segment is left out (no
     command follows it). An axis with a zero acceleration never moves: inf.
@@ -218,8 +219,8 @@ def unreached_segments(segments: Sequence[Segment], max_velocity: Sequence[float
     for i, seg in enumerate(segments):
         cmd = np.array(limit_command((seg.vx, seg.vy, seg.wz), max_velocity, max_command_norm))
         change = np.abs(cmd - before)
-        with np.errstate(divide="ignore", invalid="ignore"):  # 0 acceleration: inf if changed
-            ramp = float(np.max(np.where(change > 0.0, change / amax, 0.0)))
+        # an axis that cannot accelerate never gets there
+        ramp = math.inf if np.any((change > 0.0) & (amax <= 0.0)) else ramp_time(change, amax)
         if i < len(segments) - 1 and ramp > seg.duration + 1e-9:
             out.append((i, ramp))
         before = cmd

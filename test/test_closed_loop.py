@@ -985,11 +985,13 @@ def test_segments_the_commands_ramp_cannot_reach_are_found():
                               [1.0, 1.0, 2.0]) == []
     assert unreached_segments(load_profile(DEFAULT_PROFILE), [0.6, 0.5, 0.8],
                               [1.0, 1.0, 2.0]) == []
-    # the combined limit as the MPC applies it: (0.6, 0.5, 0.8) is cut to 0.82 of each
-    corner = [Segment(0.55, vx=0.6, vy=0.5, wz=0.8), Segment(1.0)]
+    # the combined limit as the MPC applies it: (0.6, 0.5, 0.8) is cut to 0.82 of each, and
+    # the ramp's accelerations are combined too: (0.49, 0.41, 0.65) takes 0.72 s
+    corner = [Segment(0.75, vx=0.6, vy=0.5, wz=0.8), Segment(1.0)]
     assert unreached_segments(corner, [0.6, 0.5, 0.8], [1.0, 1.0, 2.0]) == []
-    assert [i for i, _ in unreached_segments(corner, [0.6, 0.5, 0.8], [1.0, 1.0, 2.0],
-                                             max_command_norm=2.0)] == [0]
+    found = unreached_segments(corner, [0.6, 0.5, 0.8], [1.0, 1.0, 2.0], max_command_norm=2.0)
+    assert [i for i, _ in found] == [0] and found[0][1] == pytest.approx(
+        math.sqrt(0.6 ** 2 + 0.5 ** 2 + 0.4 ** 2))
     # an axis that cannot accelerate never reaches a command (no 0/0 warnings on the others)
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -7,6 +7,12 @@ whole has one more: its Euclidean norm, with every axis divided by its limit, is
 go1 and solo12 trot every pair of axes at their limits, but fell after ~5 s with all three at
 them (vx forward, vy and wz negative; doc/locomotion.md). ``max_norm >= sqrt(3)`` leaves the
 per-axis limits alone. Plain floats: called on every command message and MPC tick.
+
+The MPC ramps its command toward the limited one along a straight line in command space,
+each axis's acceleration a share of its limit (``max_acceleration``) and the shares of norm
+1 (:func:`ramp_time`): one axis alone at its limit, two or three together slower. Each axis
+at its own limit made a reversal of vx, vy and wz together 1.4x the acceleration of any one,
+and go2 sank 6 cm with a tracking RMSE of 0.15 for 2 s (session 30 audit).
 """
 
 from __future__ import annotations
@@ -14,7 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-__all__ = ["DEFAULT_MAX_NORM", "limit_command"]
+__all__ = ["DEFAULT_MAX_NORM", "limit_command", "ramp_time"]
 
 #: the default combined limit: two axes at their limits together
 DEFAULT_MAX_NORM = math.sqrt(2.0)
@@ -33,3 +39,11 @@ def limit_command(cmd: Sequence[float], max_velocity: Sequence[float],
         scale = max_norm / norm
         out = [c * scale for c in out]
     return out[0], out[1], out[2]
+
+
+def ramp_time(change: Sequence[float], max_acceleration: Sequence[float]) -> float:
+    """Time (s) the MPC's command ramp takes for a ``change`` of ``(vx, vy, wz)``: the norm of
+    each axis's change divided by its acceleration limit (axes with a zero limit do not
+    move and are left out). Plain floats."""
+    return math.sqrt(sum((float(c) / float(a)) ** 2
+                         for c, a in zip(change, max_acceleration, strict=True) if a > 0))

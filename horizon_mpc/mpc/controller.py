@@ -19,7 +19,7 @@ import pinocchio as pin
 from horizon_mpc.codegen import BufferedFunction
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings, build_walking_problem, config_gait, make_gait
-from horizon_mpc.locomotion.command import limit_command
+from horizon_mpc.locomotion.command import limit_command, ramp_time
 from horizon_mpc.locomotion.gaits import speed_scale
 from horizon_mpc.locomotion.pose_reference import (
     advance_pose,
@@ -514,8 +514,9 @@ class WalkingMpc:
 
     def _ramp_command(self, cmd: np.ndarray | None, dt: float) -> None:
         """Move the ramped command toward ``cmd`` (None: zero; NaN/inf: zero), limited per
-        axis and as a whole (:func:`limit_command`), by at most the acceleration limits
-        times ``dt``."""
+        axis and as a whole (:func:`limit_command`), for ``dt`` along the ramp of
+        :func:`~horizon_mpc.locomotion.command.ramp_time` (the axes' accelerations, each a
+        share of its limit, of norm at most 1)."""
         st = self.settings
         cmd = [0.0, 0.0, 0.0] if cmd is None else np.asarray(cmd, float).tolist()
         # three numbers: plain floats (numpy's per-call overhead was ~50 us a tick here)
@@ -528,9 +529,14 @@ class WalkingMpc:
             # the command ramps up again with the new gait, where it held on and go2,
             # stopped by the change, lunged to 0.8 m/s to catch up a 0.3 m/s command
             target = (0.0, 0.0, 0.0)
-        for i, (c, amax) in enumerate(zip(target, st.max_acceleration, strict=True)):
-            step = amax * dt
-            self.cmd[i] += min(max(c - self.cmd[i], -step), step)
+        # along a straight line in command space, the axes' accelerations of normalised
+        # norm <= 1 (locomotion/command.py: a reversal of all three axes at once, each at
+        # its own limit, made go2 sink 6 cm)
+        delta = [c - x for c, x in zip(target, self.cmd, strict=True)]
+        need = ramp_time(delta, st.max_acceleration)
+        share = 1.0 if need <= dt else dt / need
+        for i, (d, amax) in enumerate(zip(delta, st.max_acceleration, strict=True)):
+            self.cmd[i] += d * share if amax > 0 else 0.0
 
     @property
     def velocity_limits(self) -> list[float]:
