@@ -639,9 +639,10 @@ def test_an_unknown_robot_fails_before_any_process_starts(started_processes):
 
 
 def test_an_mpc_process_that_fails_to_start_is_a_clear_error(started_processes):
-    with pytest.raises(MpcProcessError, match=r"(?s)exited with code 1 .*trigger must be"):
+    with pytest.raises(MpcProcessError,
+                       match=r"(?s)exited with code 1 .*state_reliability must be"):
         run("go2", REALTIME_SHORT, mode="realtime", gif=False,
-            mpc_parameters={"trigger": "sometimes"})
+            mpc_parameters={"state_reliability": "sometimes"})
     assert len(started_processes) == 1 and not started_processes[0].alive()
 
 
