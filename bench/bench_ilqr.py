@@ -141,7 +141,7 @@ def build_trot(n_nodes: int | None = None, vx: float = V_FORWARD, codegen: bool 
     t0 = time.perf_counter()
     cfg = load_robot_config(ROBOT)
     model = RobotModel.from_example(ROBOT)
-    settings = MpcSettings.from_dict(cfg.section("mpc"))
+    settings = MpcSettings.from_config(cfg)
     if n_nodes is not None:
         settings.n_nodes = int(n_nodes)
     wp = build_walking_problem(model, cfg, settings)

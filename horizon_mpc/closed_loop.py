@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import numbers
 import os
 import signal
 import sys
@@ -173,9 +174,11 @@ def run(robot: str = "go2", segments: Sequence[Segment] | None = None,
         duration = sum(s.duration for s in segments)
     # the CLI's checks, for a call from Python too (a NaN duration never ended; a misspelt
     # parameter ran the default without a word)
-    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+    if isinstance(duration, bool) or not (isinstance(duration, numbers.Real)
+                                          and math.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be a finite number of seconds > 0, got {duration!r}")
-    if iterations is not None and not (isinstance(iterations, int) and iterations >= 1):
+    if iterations is not None and (isinstance(iterations, bool) or not (
+            isinstance(iterations, numbers.Integral) and iterations >= 1)):
         raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
     check_mpc_parameter_names(list(mpc_parameters or {}), "mpc_parameters: ")
     if mode not in ("lockstep", "realtime"):

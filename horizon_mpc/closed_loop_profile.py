@@ -4,6 +4,7 @@ scripted pushes, read from YAML (format in ``doc/closed_loop.md``)."""
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,10 +50,12 @@ class Segment:
     wz: float = 0.0
 
     def __post_init__(self) -> None:
-        values = {k: _number(getattr(self, k), k) for k in ("duration", "vx", "vy", "wz")}
-        if not values["duration"] > 0:
+        for k in ("duration", "vx", "vy", "wz"):  # plain floats (numpy's, a '2' too)
+            setattr(self, k, _number(getattr(self, k), k))
+        if not self.duration > 0:
             raise ValueError(f"non-positive duration {self.duration}")
-        fast = {k: v for k, v in values.items() if k != "duration" and abs(v) > MAX_COMMAND}
+        fast = {k: v for k, v in (("vx", self.vx), ("vy", self.vy), ("wz", self.wz))
+                if abs(v) > MAX_COMMAND}
         if fast:
             raise ValueError(f"{fast} beyond {MAX_COMMAND:g} (m/s, rad/s), which the MPC node "
                              "rejects as garbage")
@@ -72,12 +75,17 @@ class Push:
     duration: float = 0.1
 
     def __post_init__(self) -> None:
-        if not isinstance(self.force, (list, tuple)) or len(self.force) != 3:
+        try:
+            three = not isinstance(self.force, (str, bytes)) and np.shape(self.force) == (3,)
+        except ValueError:  # ragged
+            three = False
+        if not three:
             raise ValueError(f"force must be a list [fx, fy, fz], got {self.force!r}")
-        force = [_number(f, "force") for f in self.force]
-        if _number(self.time, "time") < 0 or not _number(self.duration, "duration") > 0:
+        self.force = tuple(_number(f, "force") for f in self.force)
+        self.time, self.duration = _number(self.time, "time"), _number(self.duration, "duration")
+        if self.time < 0 or not self.duration > 0:
             raise ValueError("time must be >= 0 and duration > 0")
-        if max(map(abs, force)) > MAX_PUSH:
+        if max(map(abs, self.force)) > MAX_PUSH:
             raise ValueError(f"force beyond {MAX_PUSH:g} N")
 
 
@@ -108,7 +116,7 @@ def _number(value: object, where: str) -> float:
             value = float(value)
         except ValueError:
             raise ValueError(f"{where} must be a number, got {value!r}") from None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise ValueError(f"{where} must be a number, got {value!r}")
     x = float(value)
     if not math.isfinite(x):

@@ -141,12 +141,13 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
-# a number in exponent notation without a point (1e-4) is a float, as in YAML 1.2 and the
-# ROS parameter files: PyYAML's YAML 1.1 read it as the text '1e-4', and a weight given so
-# was "not a number"
+# a number in exponent notation without a point or a sign in the exponent (1e-4, 1.5e3)
+# is a float, as in YAML 1.2 and the ROS parameter files: PyYAML's YAML 1.1 read it as
+# text, and a weight given so was "not a number"
 _UniqueKeyLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
-    list("-+0123456789"))
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+.0123456789"))
 
 
 def parse_yaml(text: str) -> Any:

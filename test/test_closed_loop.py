@@ -1042,3 +1042,17 @@ def test_a_duration_past_the_profile_is_a_zero_command_segment_of_its_own(tmp_pa
     assert [s["command"] for s in segments] == [{"vx": 0.1, "vy": 0.0, "wz": 0.0},
                                                 {"vx": 0.0, "vy": 0.0, "wz": 0.0}]
     assert segments[1]["start"] == pytest.approx(0.2)
+
+
+def test_segments_and_pushes_take_numpy_numbers_and_keep_plain_floats():
+    """Push(1.0, np.array([...])) worked before they checked themselves (the simulator takes
+    arrays), np.float32 / np.int64 too; a '2' was checked but kept as text (a reviewer)."""
+    import numpy as np
+
+    push = Push(np.float32(1.0), np.array([10.0, 0.0, 0.0]))
+    assert push.force == (10.0, 0.0, 0.0) and type(push.time) is float
+    seg = Segment(np.int64(2), np.float32(0.25))
+    assert (seg.duration, seg.vx) == (2.0, 0.25) and type(seg.duration) is float
+    assert Segment("2").duration == 2.0
+    with pytest.raises(ValueError, match="force must be a list"):
+        Push(1.0, [[1.0, 2.0], [3.0]])

@@ -134,9 +134,13 @@ def test_another_drivers_joint_state_and_a_mismatched_effort_are_named():
     """A gripper driver's JointState on the topic: 'lacks joints [all of them]' (its
     messages displace the robot's from the depth-1 queue: now said); an effort array of the
     wrong length was accepted without a word (efforts are not used)."""
-    with pytest.raises(ValueError, match=r"none of the model's joints \(it names "
-                       r"\['gripper_joint'\]\): another driver's on the same topic"):
+    with pytest.raises(ValueError, match=r"none of the model's joints \['a', 'b', 'c'\] \(it "
+                       r"names \['gripper_joint'\]\): another driver's on the same topic"):
         joints_from_joint_state(JointState(name=["gripper_joint"], position=[0.0]), JOINTS)
+    # the robot's own driver with prefixed names is no second driver (a reviewer)
+    with pytest.raises(ValueError, match=r"names with a prefix\? \('go2/a' ends in 'a'"):
+        joints_from_joint_state(JointState(name=["go2/a", "go2/b", "go2/c"],
+                                           position=[0.0] * 3), JOINTS)
     msg = JointState(name=JOINTS, position=[0.0] * 3, velocity=[0.0] * 3, effort=[math.nan])
     qj, _, notes = joints_from_joint_state(msg, JOINTS)
     assert notes == ["JointState.effort has 1 values for 3 names (efforts are not used)"]
@@ -416,8 +420,16 @@ def test_a_simulator_reset_is_not_blamed_on_clocks_that_differ(context, walking_
         node._on_odom(odometry_to_msg(time_from_ns(ahead), q[:3], q[3:7], zeros, zeros))
         assert not node.tick()
         assert said[-1][0] == "future" and "use_sim_time" in said[-1][1]
-        # both streams ahead: both named (a tie named odom only)
+        # both streams ahead: both named (a tie named odom only, other stamps the later one)
         assert said[-1][1].startswith("joint_states and odom are stamped 1.000 s ahead")
+        node._joints_recent.clear()  # (else the pair of equal stamps above is taken again)
+        node._base_recent.clear()
+        node._on_joint_state(joint_state_to_msg(time_from_ns(ahead + 200_000_000),
+                                                node.joint_names, q[7:], np.zeros(len(q) - 7)))
+        node._on_odom(odometry_to_msg(time_from_ns(ahead + 100_000_000), q[:3], q[3:7], zeros,
+                                      zeros))
+        assert not node.tick()
+        assert said[-1][1].startswith("joint_states and odom are stamped 1.200 s ahead")
     finally:
         node.destroy_node()
 

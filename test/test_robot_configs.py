@@ -236,10 +236,13 @@ def test_exponents_without_a_point_are_numbers_and_overrides_merge_key_by_key(tm
     walk}} took the library's step duration and height, not solo12's)."""
     from horizon_mpc.locomotion import MpcSettings
 
-    cfg = _config(tmp_path, _GO2 + "mpc: {weights: {acceleration: 1e-4, force: 2E+3}, "
+    cfg = _config(tmp_path, _GO2 + "mpc: {weights: {acceleration: 1e-4, force: 2E+3, "
+                  "posture: 1.5e3, base_yaw: .5e1}, "
                   "gait: {step_duration: 0.25, step_height: 0.04}}\n")
     st = MpcSettings.from_config(cfg, {"gait": {"name": "walk"}, "weights": {"posture": 1.0}})
     assert (st.weights.acceleration, st.weights.force, st.weights.posture) == (1e-4, 2e3, 1.0)
+    assert MpcSettings.from_config(cfg).weights.posture == 1500.0
+    assert st.weights.base_yaw == 5.0
     assert (st.gait.name, st.gait.step_duration, st.gait.step_height) == ("walk", 0.25, 0.04)
 
 

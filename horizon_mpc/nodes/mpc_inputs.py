@@ -114,9 +114,17 @@ def _name_match(names: tuple[str, ...], joint_names: tuple[str, ...]) -> tuple[
     if missing and names and len(missing) == len(joint_names):
         shown = [clipped(n) for n in names[:NAMES_SHOWN]]
         more = f" and {len(names) - NAMES_SHOWN} more" if len(names) > NAMES_SHOWN else ""
-        raise ValueError(f"JointState has none of the model's joints (it names {shown}{more}):"
-                         " another driver's on the same topic (a gripper's?); the robot's "
-                         "own are then the ones that arrive between its messages")
+        # the model's names under a prefix ('go2/FL_hip_joint'): the robot's own driver
+        prefixed = next(((n, j) for n in names for j in joint_names
+                         if n != j and n.endswith(j)), None)
+        why = (f"names with a prefix? ({clipped(prefixed[0])!r} ends in {prefixed[1]!r}; the "
+               "model's joint names are the URDF's)" if prefixed else
+               "another driver's on the same topic (a gripper's?): the robot's own are then "
+               "the ones that arrive between its messages")
+        model = list(joint_names[:NAMES_SHOWN]) + (["..."] if len(joint_names) > NAMES_SHOWN
+                                                    else [])
+        raise ValueError(f"JointState has none of the model's joints {model} (it names "
+                         f"{shown}{more}): {why}")
     if missing:
         raise ValueError(f"JointState lacks joints {missing}")
     needed_duplicates = sorted(duplicates & set(joint_names))

@@ -630,9 +630,11 @@ class MpcNode(MpcParameters, Node):
         if ahead > self.state_timeout and self._clock_back:
             return self._after_clock_went_back(now_ns, stamp_ns)
         if ahead > self.state_timeout:
-            # (both: said so; a tie named odom, and a user debugged its driver)
+            # (both ahead: both named; the later one only was, and a user debugged one
+            # driver of two)
+            both = min(joints[0], base[0]) - now_ns > self.state_timeout * NS_PER_S
             stream = (f"{self._input('joint_states')} and {self._input('odom')} are"
-                      if joints[0] == base[0] else f"{self._input(stream)} is")
+                      if both else f"{self._input(stream)} is")
             return self._skip_stale(-ahead, "future", f"{stream} stamped {ahead:.3f} s "
                                     "ahead of the node's clock (more than state_timeout "
                                     f"{self.state_timeout:g} s): not planning; do the "

@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import numbers
 import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -136,14 +137,15 @@ class Simulator:
         # refused every trajectory, a NaN friction was taken)
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"dt must be a finite number > 0, got {dt}")
-        for name, value, low in (("friction", friction, 0.0),
-                                 ("trajectory_timeout", trajectory_timeout, None),
-                                 ("max_stamp_offset", max_stamp_offset, None)):
-            if value is not None and not (
-                    isinstance(value, (int, float, np.floating)) and not isinstance(value, bool)
-                    and math.isfinite(value) and (value >= low if low is not None else value > 0)):
-                raise ValueError(f"{name} must be a finite number "
-                                 f"{'>= 0' if low is not None else '> 0'}, got {value!r}")
+        for name, value, rule in (("friction", friction, "a finite number >= 0"),
+                                  ("trajectory_timeout", trajectory_timeout, "a number > 0"),
+                                  ("max_stamp_offset", max_stamp_offset, "a number > 0")):
+            # (the time-outs may be inf: no limit)
+            ok = value is None or (isinstance(value, numbers.Real) and not isinstance(
+                value, (bool, np.bool_)) and (math.isfinite(value) and value >= 0
+                                              if name == "friction" else value > 0))
+            if not ok:
+                raise ValueError(f"{name} must be {rule}, got {value!r}")
         if base_pose is not None and not (
                 np.shape(base_pose) == (3,) and np.all(np.isfinite(np.asarray(base_pose,
                                                                                float)))):
