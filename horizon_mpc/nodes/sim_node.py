@@ -84,8 +84,9 @@ class FromConfig:
 
 def mpc_period(cfg: RobotConfig) -> float:
     """The MPC node's default control period (s) for ``cfg``: its ``mpc.dt`` (the node
-    ticks every dt unless given a control_rate)."""
-    return float(cfg.section("mpc").get("dt", MpcSettings.dt))
+    ticks every dt unless given a control_rate; a section the MPC would refuse is refused
+    here too, naming the file)."""
+    return float(MpcSettings.from_config(cfg).dt)
 
 
 #: sim_node's parameters: (name, default, description[, range]); a :class:`FromConfig`
