@@ -146,7 +146,7 @@ class _UniqueKeyLoader(yaml.SafeLoader):
 # text, and a weight given so was "not a number"
 _UniqueKeyLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
     list("-+.0123456789"))
 
 
@@ -174,11 +174,11 @@ def read_yaml(path: str | Path) -> Any:
     with open(path, encoding="utf-8") as fh:
         try:
             return yaml.load(fh, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
-        except yaml.YAMLError as exc:
-            raise ValueError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
-        except UnicodeDecodeError as exc:
+        except UnicodeDecodeError as exc:  # (a ValueError: before the next)
             raise ValueError(f"{path}: not a text file (UTF-8): {exc.reason} at byte "
                              f"{exc.start}") from None
+        except (yaml.YAMLError, ValueError) as exc:  # (a scalar a constructor refuses)
+            raise ValueError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
 
 
 def field_default(f: dataclasses.Field) -> Any:

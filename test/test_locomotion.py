@@ -913,6 +913,12 @@ def test_plans_schedules_and_ticks_refuse_arguments_of_the_wrong_kind(walking_mp
             gait.schedule(*args)
     with pytest.raises(ValueError, match="time must be a finite number"):
         walking_mpc.update("0", q, np.zeros(walking_mpc.model.nv))
+    for bad in (True, "0.04", math.nan):  # True was a tick at 1 s (a reviewer)
+        with pytest.raises(ValueError, match=r"prepare\(\): the tick time must be a finite"):
+            walking_mpc.prepare(bad)
+    assert walking_mpc.t_last == 0.0
+    assert walking_mpc.prepare(np.array(0.02)) and walking_mpc.t_last == 0.02  # 0-d: taken
+    assert isinstance(walking_mpc.t_last, float)
     with pytest.raises(ValueError, match="n_nodes must be an int >= 1, got True"):
         Problem(True)
 

@@ -243,6 +243,10 @@ def test_exponents_without_a_point_are_numbers_and_overrides_merge_key_by_key(tm
     assert (st.weights.acceleration, st.weights.force, st.weights.posture) == (1e-4, 2e3, 1.0)
     assert MpcSettings.from_config(cfg).weights.posture == 1500.0
     assert st.weights.base_yaw == 5.0
+    from horizon_mpc.config import parse_yaml
+
+    assert [parse_yaml(t) for t in ("._e3", "1.2.3", "e5", "0x1F")] == ["._e3", "1.2.3",
+                                                                         "e5", 31]
     assert (st.gait.name, st.gait.step_duration, st.gait.step_height) == ("walk", 0.25, 0.04)
 
 

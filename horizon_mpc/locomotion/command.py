@@ -11,8 +11,9 @@ per-axis limits alone. Plain floats: called on every command message and MPC tic
 The MPC ramps its command toward the limited one along a straight line in command space,
 each axis's acceleration a share of its limit (``max_acceleration``) and the shares of norm
 1 (:func:`ramp_time`): one axis alone at its limit, two or three together slower. Each axis
-at its own limit made a reversal of vx, vy and wz together 1.4x the acceleration of any one,
-and go2 sank 6 cm with a tracking RMSE of 0.15 for 2 s (session 30 audit).
+at its own limit (three axes at once: sqrt(3) = 1.7x the normalised acceleration of one),
+a reversal of vx, vy and wz together made go2 sink 6 cm with a tracking RMSE of 0.15 for
+2 s (session 30 audit).
 """
 
 from __future__ import annotations

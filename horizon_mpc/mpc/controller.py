@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -285,8 +286,7 @@ class WalkingMpc:
         """
         if self.t_last is None:
             raise RuntimeError("prepare() needs a started controller (start() or update())")
-        if not math.isfinite(t_next):
-            raise ValueError(f"prepare(): the tick time must be finite, got {t_next}")
+        t_next = _checked_time(t_next, "prepare(): the tick time")
         if t_next < self.t_last:
             # the next tick's: one before the last moved the controller's time back, and
             # the next update took the whole gap as elapsed (solo12 ran 0.55 m/s for 0.2)
@@ -455,9 +455,7 @@ class WalkingMpc:
                        ) -> tuple[np.ndarray, np.ndarray]:
         """``(q, v)`` as clean float arrays (:meth:`_clean_q`), or ValueError naming what is
         wrong: a time or a state entry not finite, a state of the wrong shape."""
-        if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) \
-                or not math.isfinite(t):
-            raise ValueError(f"the state's time must be a finite number (s), got {t!r}")
+        _checked_time(t, "the state's time")
         q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
         nq, nv = self.model.nq, self.model.nv
         if q.shape != (nq,) or v.shape != (nv,):
@@ -642,6 +640,19 @@ class WalkingMpc:
         if not isinstance(stand, (bool, np.bool_)):  # bool("false") is True
             raise TypeError(f"stand_when_idle must be True or False, got {stand!r}")
         self.settings.stand_when_idle = self.scheduler.stand_when_idle = bool(stand)
+
+
+def _checked_time(t: object, what: str) -> float:
+    """``t`` (s) as a float: a finite real number (numpy's, a 0-d array too), else a
+    ValueError naming ``what`` (True was a time of 1 s, '0' a TypeError)."""
+    if isinstance(t, (bool, np.bool_)) or not (
+            isinstance(t, numbers.Real) or (isinstance(t, np.ndarray) and t.ndim == 0
+                                            and np.issubdtype(t.dtype, np.number))):
+        raise ValueError(f"{what} must be a finite number (s), got {t!r}")
+    value = float(t)
+    if not math.isfinite(value):
+        raise ValueError(f"{what} must be a finite number (s), got {t!r}")
+    return value
 
 
 def _pose(q: np.ndarray) -> tuple[float, float, float]:
