@@ -487,12 +487,23 @@ def test_wrench_pushes_the_base_and_reset_restores_the_start(harness_factory):
 
 
 def test_realtime_factor_paces_sim_time(harness_factory):
+    """Never ahead of the wall clock; behind it only as far as the machine is too slow
+    right now to run the physics in real time (a CI run with two other jobs on the 2 cores
+    paced it at 0.22: the bound is scaled by the speed of the bare physics measured just
+    before)."""
     h = harness_factory(realtime_factor=1.0)
     h.spin_until(lambda: h.joint_states)
-    t0_wall, t0_sim = time.monotonic(), h.sim.sim.time
+    sim = h.sim.sim
+    t0_wall, t0_sim = time.monotonic(), sim.time
+    sim.step(200)  # the bare physics (and state reads), unpaced
+    free = (sim.time - t0_sim) / (time.monotonic() - t0_wall)
+    t0_wall, t0_sim = time.monotonic(), sim.time
     h.spin_until(lambda: time.monotonic() - t0_wall > 1.0)
-    rate = (h.sim.sim.time - t0_sim) / (time.monotonic() - t0_wall)
-    assert 0.8 < rate < 1.1
+    rate = (sim.time - t0_sim) / (time.monotonic() - t0_wall)
+    assert rate < 1.1
+    # the node's publication costs: free-running it reaches ~1/5 of the bare physics'
+    # speed (doc/benchmarks.md, Simulator: RTF 1.5 at 500 Hz states, ~7 kHz bare steps)
+    assert rate > 0.8 * min(1.0, free / 5.0), (rate, free)
 
 
 @pytest.mark.parametrize("second_after", [None, 0.03])
