@@ -813,7 +813,7 @@ def _checked_arguments(args: argparse.Namespace, profile: str) -> tuple[list, li
         check_mpc_parameter_names([name], "-p ")
         try:
             params[name] = parse_yaml(value)
-        except yaml.YAMLError as exc:
+        except (yaml.YAMLError, ValueError) as exc:  # (ValueError: a date 2001-13-45)
             raise ValueError(f"-p {name}: {value!r} is not a YAML value ({exc})") from None
     try:  # last: a refused command line leaves no folder behind
         out.mkdir(parents=True, exist_ok=True)

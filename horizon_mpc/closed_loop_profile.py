@@ -103,7 +103,7 @@ def _read(path: str | Path) -> tuple[Path, object]:
     if isinstance(data, dict):
         unknown = set(data) - {"segments", "pushes"}
         if unknown:
-            raise ValueError(f"{path}: unknown key(s) {sorted(unknown)}; a profile has "
+            raise ValueError(f"{path}: unknown key(s) {sorted(map(str, unknown))}; a profile has "
                              "'segments' and optionally 'pushes'")
     return path, data
 
@@ -118,7 +118,10 @@ def _number(value: object, where: str) -> float:
             raise ValueError(f"{where} must be a number, got {value!r}") from None
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise ValueError(f"{where} must be a number, got {value!r}")
-    x = float(value)
+    try:
+        x = float(value)
+    except OverflowError:  # an integer beyond a float's range
+        x = math.inf
     if not math.isfinite(x):
         raise ValueError(f"{where} must be finite, got {value!r}")
     return x

@@ -131,6 +131,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
         seen = set()
         for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":  # '<<: *anchor', the base's own
+                continue
             key = self.construct_object(key_node, deep=True)
             if isinstance(key, list | dict):
                 continue  # unhashable: the base class says so
@@ -151,8 +153,16 @@ _UniqueKeyLoader.add_implicit_resolver(
 
 
 def parse_yaml(text: str) -> Any:
-    """The data of a YAML text (a ``--set`` value), read as :func:`read_yaml` reads files."""
-    return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
+    """The data of a YAML text (a ``--set`` value), read as :func:`read_yaml` reads files.
+
+    Raises:
+        yaml.YAMLError: not YAML; ValueError: a scalar its constructor refuses (a date
+            2001-13-45), nesting too deep.
+    """
+    try:
+        return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
 
 
 def merged(*layers: dict[str, Any]) -> dict[str, Any]:
@@ -179,6 +189,8 @@ def read_yaml(path: str | Path) -> Any:
                              f"{exc.start}") from None
         except (yaml.YAMLError, ValueError) as exc:  # (a scalar a constructor refuses)
             raise ValueError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
+        except RecursionError:
+            raise ValueError(f"{path}: not valid YAML (nested too deeply)") from None
 
 
 def field_default(f: dataclasses.Field) -> Any:
@@ -209,17 +221,28 @@ def check_settings(settings: object, positive: tuple[str, ...] = (),
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"setting {name!r} must be true or false, got {value!r}")
             continue
-        if (value is None or isinstance(value, (list, tuple, dict))
+        kind = str(f.type)
+        number = ("float" in kind or "int" in kind) and not any(
+            k in kind for k in ("list", "dict", "tuple", "Sequence"))
+        if (value is None or (isinstance(value, (list, tuple, dict)) and not number)
                 or dataclasses.is_dataclass(value) or isinstance(default, str)):
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"setting {name!r} must be a number, got {value!r}")
-        if not math.isfinite(value):
+        if not _finite(value):
             raise ValueError(f"setting {name!r} must be finite, got {value!r}")
         if f.name in positive and not value > 0:
             raise ValueError(f"setting {name!r} must be > 0, got {value!r}")
         if f.name in non_negative and value < 0:
             raise ValueError(f"setting {name!r} must be >= 0, got {value!r}")
+
+
+def _finite(value: float) -> bool:
+    """``math.isfinite``, False for an int beyond a float's range (an OverflowError)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 _KNOWN = {"robot", "urdf_path", "base_link", "feet", "nominal_posture", "nominal_joints",
@@ -238,6 +261,8 @@ def _number(path: Path, key: str, value: Any, lowest: float = -math.inf,
         x = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{path}: '{key}' must be a number, got {value!r}") from None
+    except OverflowError:  # an integer beyond a float's range
+        x = math.inf
     if not math.isfinite(x) or x < lowest or (strict and x == lowest):
         bound = f"{'>' if strict else '>='} {lowest:g}" if lowest > -math.inf else "finite"
         raise ValueError(f"{path}: '{key}' must be {bound}, got {value!r}")
@@ -262,7 +287,7 @@ def _sim_gains(path: Path, sim: dict) -> SimGains:
     length is checked against the robot's joints by the simulator), the others positive."""
     unknown = set(sim) - set(SimGains.__dataclass_fields__)
     if unknown:
-        raise ValueError(f"{path}: unknown keys in 'sim': {sorted(unknown)} (known: "
+        raise ValueError(f"{path}: unknown keys in 'sim': {sorted(map(str, unknown))} (known: "
                          f"{sorted(SimGains.__dataclass_fields__)})")
     out = {}
     for key, value in sim.items():
@@ -339,11 +364,16 @@ def load_robot_config(name_or_path: str | Path) -> RobotConfig:
     if not data.get("robot") and not data.get("urdf_path"):
         raise ValueError(f"{path}: needs 'robot' (example-robot-data name) or 'urdf_path'")
     for key in ("robot", "base_link", "nominal_posture"):
-        if data.get(key) is not None and not isinstance(data[key], str):
+        # (base_link: null was taken as a base link called None)
+        if key in data and (data[key] is not None or key == "base_link") and not (
+                isinstance(data[key], str) and data[key]):
             raise ValueError(f"{path}: '{key}' must be a name, got {data[key]!r}")
     feet = data.get("feet")
-    if not isinstance(feet, list) or not feet:
-        raise ValueError(f"{path}: 'feet' must be a non-empty list of contact frame names")
+    if not isinstance(feet, list) or not feet or not all(isinstance(f, str) and f
+                                                         for f in feet):
+        # (a null or a number was taken as the frame 'None' or '3')
+        raise ValueError(f"{path}: 'feet' must be a non-empty list of contact frame names, "
+                         f"got {feet!r}")
     twice = sorted({str(f) for f in feet if feet.count(f) > 1})
     if twice:  # was "a constraint or cost called 'FL_foot_velocity' already exists"
         raise ValueError(f"{path}: 'feet' names {twice} more than once")

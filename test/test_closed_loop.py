@@ -1056,3 +1056,17 @@ def test_segments_and_pushes_take_numpy_numbers_and_keep_plain_floats():
     assert Segment("2").duration == 2.0
     with pytest.raises(ValueError, match="force must be a list"):
         Push(1.0, [[1.0, 2.0], [3.0]])
+
+
+def test_fuzzed_profiles_fail_with_a_value_error_naming_the_file(tmp_path):
+    """A huge integer was an OverflowError, mixed-type top-level keys a TypeError from
+    sorted() (an auditor's fuzzing)."""
+    huge = "1" + "0" * 400
+    for text, match in ((f"segments: [{{duration: {huge}}}]\n", "duration must be finite"),
+                        ("segments: [{duration: 1.0}]\n1: x\nfoo: y\n",
+                         r"unknown key\(s\) \['1', 'foo'\]")):
+        path = tmp_path / "p.yaml"
+        path.write_text(text)
+        with pytest.raises(ValueError, match=match) as err:
+            load_profile(path)
+        assert "p.yaml" in str(err.value)

@@ -996,3 +996,29 @@ def test_an_unsolved_leap_the_simulator_refuses_to_replay_is_written_and_said(tm
     assert "times the URDF effort limits" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert "per s, beyond 100" in summary["pybullet_replay"]["not_replayed"]
+
+
+def test_fuzzed_motion_settings_fail_with_a_value_error_naming_the_setting(tmp_path):
+    """An auditor's fuzzing: a huge integer was an OverflowError, mixed-type keys a
+    TypeError from sorted(), a list or a mapping for a number setting was taken (friction
+    [-5]), 'settings: 0' was no settings, a date that is none a bare 'month must be in
+    1..12'."""
+    from horizon_mpc.motions.cli import _overrides
+    from horizon_mpc.motions.settings import load_motion_config
+
+    leap = load_motion_config("leap")
+    huge = "1" + "0" * 400
+    for item, match in ((f"dt={huge}", "'dt' must be a number"),
+                        ("friction=[1, 2]", "'friction' must be a number"),
+                        ("foot_radius={a: 1}", "'foot_radius' must be a number")):
+        with pytest.raises(ValueError, match=match):
+            leap.settings_for(LeapSettings, "go2", _overrides([item]))
+    with pytest.raises(ValueError, match=r"--set 'duration=2001-13-45': not a YAML value"):
+        _overrides(["duration=2001-13-45"])
+    for text, match in (("settings: {dt: 0.02}\n1: x\nfoo: y\n",
+                         r"unknown key\(s\) \['1', 'foo'\]"),
+                        ("settings: 0\n", "'settings' must be a mapping")):
+        path = tmp_path / "m.yaml"
+        path.write_text(text)
+        with pytest.raises(ValueError, match=match):
+            load_motion_config(path)

@@ -813,11 +813,11 @@ def test_states_without_ticks_get_explained(harness, monkeypatch):
     h = harness(trigger="timer", use_sim_time=True)  # and nothing publishes /clock
     said: list[str] = []
     monkeypatch.setattr(h.node, "_warn", lambda kind, text: said.append(kind))
-    h.node._check_progress()
+    h.node._check_progress()  # no state yet: said so
     h.publish_state()
     h.spin_until(lambda: h.node._states_in >= 2)
     h.node._check_progress()
-    assert said == ["no_clock"] and not h.trajectories
+    assert said == ["no_state", "no_clock"] and not h.trajectories
 
 
 def test_an_array_weight_set_as_ros2_param_set_delivers_it_applies(harness):
@@ -1953,9 +1953,13 @@ def test_a_stopped_simulator_is_reported_on_the_wall_clock(context, walking_mpc)
 def test_a_node_waiting_for_its_states_says_so_on_diagnostics(context, walking_mpc):
     """A node with no joint_states / odom yet published nothing on /diagnostics: an
     aggregator could not tell it from a node that is not running (an auditor's). The
-    wall-clock watchdog now sends a WARN naming what is missing, every look."""
+    wall-clock watchdog now sends a WARN naming what is missing, every look, and says it
+    in the log (throttled): a node on a sim clock that stands, or with trigger 'state',
+    never ticked and logged nothing after 'waiting for ...' (an auditor)."""
     node = sim_time_node(context, walking_mpc)
     node._pub_diag = Sent()
+    said: list[tuple[str, str]] = []
+    node._warn = lambda kind, text: said.append((kind, text))
     try:
         for _ in range(2):
             sent = len(node._pub_diag.msgs)
@@ -1964,6 +1968,8 @@ def test_a_node_waiting_for_its_states_says_so_on_diagnostics(context, walking_m
             status = node._pub_diag.msgs[-1].status[0]
             assert status.level == DiagnosticStatus.WARN
             assert status.message == "waiting for joint_states and odom: not planning"
+            assert said[-1] == ("no_state", "no joint_states and no odom received yet; not "
+                                            "planning")
         drive_in_sim_time(node, 3)  # planning: the watchdog has nothing to add
         sent = len(node._pub_diag.msgs)
         node._check_progress()

@@ -359,3 +359,54 @@ def test_the_walking_mpc_names_what_it_cannot_take():
     with pytest.raises(ValueError, match="'ur5' has a fixed base"):
         _check_joints(RobotModel.from_example("ur5"))
     _check_joints(RobotModel.from_example("go2"))
+
+
+_HUGE = "1" + "0" * 400  # an integer beyond a float's range
+
+
+@pytest.mark.parametrize("text, match", [
+    (_GO2 + f"friction: {_HUGE}\n", "'friction' must be"),
+    (_GO2 + f"sim: {{lateral_friction: {_HUGE}}}\n", "'sim.lateral_friction' must be"),
+    (_GO2 + "sim: {1: 2, foo: 3}\n", r"unknown keys in 'sim': \['1', 'foo'\]"),
+    ("robot: go2\nbase_link: null\nfeet: [FL_foot, FR_foot, RL_foot, RR_foot]\n",
+     "'base_link' must be a name, got None"),
+    ("robot: go2\nfeet: [FL_foot, null, 3, RR_foot]\n", "'feet' must be a non-empty list"),
+    ("robot: go2\nfeet: ['']\n", "'feet' must be a non-empty list"),
+    (_GO2 + "note: " + "[" * 3000 + "]" * 3000 + "\n", "nested too deeply"),
+])
+def test_fuzzed_robot_configs_fail_with_a_value_error_naming_the_file(tmp_path, text, match):
+    """An auditor's fuzzing: a huge integer was an OverflowError, mixed-type keys a
+    TypeError from sorted(), deep nesting a RecursionError; base_link null and non-text feet
+    were taken ('None', '3')."""
+    with pytest.raises(ValueError, match=match) as err:
+        _config(tmp_path, text)
+    assert "mine.yaml" in str(err.value)
+
+
+@pytest.mark.parametrize("section, match", [
+    (f"mpc: {{friction: {_HUGE}}}\n", "'mpc.friction' must be finite"),
+    (f"mpc: {{n_nodes: {_HUGE}}}\n", "'mpc.n_nodes' must be"),
+    (f"mpc: {{weights: {{base_height: {_HUGE}}}}}\n", "'mpc.weights.base_height'"),
+    ("mpc: {1: 2, foo: 3}\n", r"unknown key\(s\) \['1', 'foo'\] in 'mpc'"),
+    ("mpc: {rho_init: [], friction: [-1]}\n", "'mpc.friction' must be a number, got"),
+    ("mpc: {gait: {name: [a]}}\n", "'mpc.gait.name' must be one of"),
+    ("mpc: {weights: {base_linear_velocity: [[1], [1, 2], 3]}}\n",
+     "'mpc.weights.base_linear_velocity' must be 3 numbers"),
+])
+def test_fuzzed_mpc_sections_fail_with_a_value_error_naming_the_key(tmp_path, section, match):
+    from horizon_mpc.locomotion import MpcSettings
+
+    with pytest.raises(ValueError, match=match):
+        MpcSettings.from_config(_config(tmp_path, _GO2 + section))
+
+
+def test_an_empty_mpc_section_keeps_the_overrides_and_merge_keys_are_yaml(tmp_path):
+    """'mpc:' with nothing under it dropped the walk's overrides (40 nodes -> 24); YAML
+    merge keys ('<<: *base') were 'not valid YAML'."""
+    from horizon_mpc.locomotion import MpcSettings
+
+    cfg = _config(tmp_path, _GO2 + "mpc:\n  # n_nodes: 30\n")
+    assert MpcSettings.from_config(cfg, {"n_nodes": 40}).n_nodes == 40
+    cfg = _config(tmp_path, _GO2 + "base: &b {lateral_friction: 0.8}\n"
+                  "sim: {<<: *b, kp: 20.0}\n")
+    assert (cfg.sim.lateral_friction, cfg.sim.kp) == (0.8, 20.0)

@@ -139,6 +139,26 @@ def test_published_state_equals_ground_truth(harness_factory):
     assert time_to_ns(h.clocks[-1].clock) == h.sim.now_ns
 
 
+def test_an_unanswered_lockstep_state_is_published_again_until_it_is_answered(
+        harness_factory):
+    """The first state went to another node's odom subscription matched before the
+    controller's (a recorder), the controller never had it and, with lockstep_timeout 0,
+    both waited for good (an auditor). The awaited state goes out again, as it was."""
+    from horizon_mpc.nodes.sim_node import LOCKSTEP_RESEND
+
+    h = harness_factory(lockstep=True, lockstep_timeout=0.0, control_period=0.01)
+    h.spin_until(lambda: h.joint_states and h.odoms)
+    end = time.monotonic() + 2.2 * LOCKSTEP_RESEND
+    h.spin_until(lambda: time.monotonic() > end)
+    assert h.sim.resends >= 2 and len(h.joint_states) >= 3 and len(h.odoms) >= 3
+    assert {time_to_ns(m.header.stamp) for m in (*h.joint_states, *h.odoms)} == {0}
+    assert h.sim.now_ns == 0  # waiting: no step
+    np.testing.assert_array_equal(h.joint_states[-1].position, h.joint_states[0].position)
+    h.wait_until_connected()
+    h.trajectory_pub.publish(trajectory(h.sim, 0))
+    h.spin_until(lambda: h.sim.now_ns == 10_000_000)
+
+
 def test_odometry_twist_is_in_the_base_frame(harness_factory):
     """Yawed 90 deg, moving along its own x: world velocity +y, published twist +x."""
     h = harness_factory(lockstep=True, lockstep_timeout=0.0, control_period=0.001)

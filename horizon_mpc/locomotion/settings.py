@@ -63,7 +63,7 @@ class GaitSettings:
     def __post_init__(self) -> None:
         check_settings(self, positive=("step_duration",), non_negative=("step_height",),
                        prefix="mpc.gait.")
-        if self.name not in GAITS:
+        if not isinstance(self.name, str) or self.name not in GAITS:
             raise ValueError(f"'mpc.gait.name' must be one of {list(GAITS)}, got {self.name!r}")
         _within("mpc.gait.step_duration", self.step_duration, STEP_DURATION_RANGE)
         _within("mpc.gait.step_height", self.step_height, STEP_HEIGHT_RANGE)
@@ -117,7 +117,7 @@ class Weights:
             value, default = getattr(self, f.name), field_default(f)
             name = f"mpc.weights.{f.name}"
             if isinstance(default, list):
-                if not (isinstance(value, (list, tuple, np.ndarray)) and np.ndim(value) == 1
+                if not (isinstance(value, (list, tuple, np.ndarray)) and _flat(value)
                         and len(value) == len(default)
                         and all(_number(x) and 0 <= x <= MAX_WEIGHT for x in value)):
                     raise ValueError(f"setting {name!r} must be {len(default)} numbers in "
@@ -238,6 +238,8 @@ class MpcSettings:
         key by key (``{gait: {name: walk}}`` changes the gait's name only); a ``ValueError``
         names the config file (it named the key only)."""
         section = cfg.section("mpc")
+        if section is None:  # 'mpc:' with nothing under it (it dropped the overrides)
+            section = {}
         try:  # (a section that is no mapping: from_dict says so)
             return cls.from_dict(merged(section, overrides or {})
                                  if isinstance(section, dict) else section)
@@ -249,11 +251,22 @@ def _check(data: dict, cls: type, where: str) -> None:
     names = {f.name for f in fields(cls)}
     unknown = set(data) - names
     if unknown:
-        raise ValueError(f"unknown key(s) {sorted(unknown)} in '{where}'; known: {sorted(names)}")
+        raise ValueError(f"unknown key(s) {sorted(map(str, unknown))} in '{where}'; known: "
+                         f"{sorted(names)}")
+
+
+def _flat(value: Any) -> bool:
+    """A flat sequence (a ragged one was numpy's 'setting an array element' error)."""
+    return all(not isinstance(x, (list, tuple, dict, np.ndarray)) for x in value)
 
 
 def _number(x: Any) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:  # an integer beyond a float's range
+        return False
 
 
 def _checked(data: Any, cls: type, where: str) -> dict:

@@ -72,6 +72,8 @@ def _overrides(items: Sequence[str]) -> dict:
             where = f" at column {mark.column + 1}" if mark is not None else ""
             raise ValueError(f"--set {item!r}: not a YAML value ({getattr(exc, 'problem', '')}"
                              f"{where})") from None
+        except ValueError as exc:  # a date 2001-13-45, nesting too deep
+            raise ValueError(f"--set {item!r}: not a YAML value ({exc})") from None
     return out
 
 

@@ -16,6 +16,7 @@ The file is looked up like the robot configs (:func:`horizon_mpc.config.config_d
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -56,9 +57,9 @@ class MotionConfig:
         values = merged(self.settings, self.robots.get(robot or self.robot, {}),
                          overrides or {})
         fields = {f.name: f for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - set(fields))
+        unknown = sorted(str(k) for k in set(values) - set(fields))
         if unknown:
-            given = sorted(set(unknown) & set(overrides or {}))  # --set, not the file's
+            given = sorted(set(unknown) & set(map(str, overrides or {})))  # --set's
             where = "--set" if given else (self.source or self.motion)
             # the motion run is the settings class's (`walk --config leap`: the walk)
             motion = cls.__name__.removesuffix("Settings").lower()
@@ -67,23 +68,39 @@ class MotionConfig:
             raise ValueError(f"{where}: unknown setting(s) {given or unknown} for motion "
                              f"{motion!r}{hint}; known: {sorted(fields)}")
         return cls(**{k: _checked_value(k, v, field_default(fields[k]),
-                                        "None" in str(fields[k].type))
+                                        "None" in str(fields[k].type), str(fields[k].type))
                       for k, v in values.items()})
 
 
 
 
-def _checked_value(key: str, value: Any, default: Any, nullable: bool = False) -> Any:
+def _finite_number(value: Any) -> bool:
+    """A finite int or float, not a bool (an int beyond a float's range is none: it was an
+    OverflowError)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def _checked_value(key: str, value: Any, default: Any, nullable: bool = False,
+                   kind: str = "") -> Any:
     """``value`` as the kind of ``default`` (an int for an int setting, a float for a float
     one, a list for a list one); ValueError naming ``key`` otherwise. Settings without a
     default (or a None one) are passed as given; so is None for a setting whose type allows
-    it (``nullable``: the leap's ``trunk_clearance``, None for no clearance)."""
+    it (``nullable``: the leap's ``trunk_clearance``, None for no clearance); a nullable
+    number (``kind``, the field's type, names float or int) must be one."""
     def bad(kind: str) -> ValueError:
         return ValueError(f"setting {key!r} must be {kind}, got {value!r}")
 
     if value is None and nullable:
         return None
-    is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    is_number = _finite_number(value)
+    if default is None and ("float" in kind or "int" in kind) and "list" not in kind \
+            and not is_number:  # a nullable number (a list, a mapping were taken)
+        raise bad("a number (or null)")
     if isinstance(default, bool):
         if not isinstance(value, bool):
             raise bad("true or false")
@@ -115,11 +132,11 @@ def load_motion_config(motion: str | Path) -> MotionConfig:
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a YAML mapping at the top level")
     known = {"robot", "solver", "settings", "robots"}
-    unknown = sorted(set(data) - known)
+    unknown = sorted(str(k) for k in set(data) - known)
     if unknown:
         raise ValueError(f"{path}: unknown key(s) {unknown}; known: {sorted(known)}")
-    settings = data.get("settings") or {}
-    robots = data.get("robots") or {}
+    settings = {} if data.get("settings") is None else data["settings"]
+    robots = {} if data.get("robots") is None else data["robots"]
     if not isinstance(settings, dict):
         raise ValueError(f"{path}: 'settings' must be a mapping of setting: value")
     if not isinstance(robots, dict) or not all(isinstance(v, dict) or v is None

@@ -67,7 +67,7 @@ class WalkSettings:
                              f"got {self.mpc!r}")
         try:  # its keys and kinds, before any build
             MpcSettings.from_dict(self.mpc)
-        except TypeError as exc:
+        except (TypeError, ValueError) as exc:
             raise ValueError(f"setting 'mpc': {exc}") from None
 
 

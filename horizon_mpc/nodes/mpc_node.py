@@ -390,6 +390,10 @@ class MpcNode(MpcParameters, Node):
                                                    ("odom", self._base)) if x is None]
             self._publish_diagnostics(None, clock_ns, clock_ns, force=True, waiting=(
                 f"waiting for {' and '.join(missing)}: not planning"))
+            # and in the log (a tick says it, but no tick comes on a sim clock that stands
+            # or, with trigger 'state', without states: the log said nothing)
+            since = "since the clock went back" if self.plan is not None else "received yet"
+            self._warn("no_state", f"no {' and no '.join(missing)} {since}; not planning")
         prev_states, prev_ticks, prev_clock = self._watch
         self._watch = (self._states_in, ticks, clock_ns)
         if self._states_in == prev_states and self.plan is not None:

@@ -68,6 +68,11 @@ ODOM_GRACE = 0.5
 #: processes started together took 1.3-3.6 s on a loaded machine, and 3 of 5 lockstep runs
 #: started without their controller with the 1 s of lockstep_timeout alone
 START_WAIT = 10.0
+#: s (wall): an unanswered lockstep state is published again this often while the simulator
+#: waits (the same stamp: a controller that has it already ignores it). The first state went
+#: to another node's odom subscription matched before the controller's (a recorder, rviz),
+#: the controller never had it, and with lockstep_timeout 0 both waited for good
+LOCKSTEP_RESEND = 0.5
 
 
 #: the lockstep emulation of a real-time loop's delays (doc/simulator.md), sim s
@@ -248,6 +253,8 @@ class SimNode(Node):
         self._started = not self.lockstep
         self._deadline = self._wall_deadline(START_WAIT)
         self._controller_seen: float | None = None  # wall time, see peers_ready
+        self._awaited: tuple[float, tuple] = (math.inf, ())  # resend time, awaited messages
+        self.resends = 0  # lockstep states published again (LOCKSTEP_RESEND)
         # free-running pacing anchors (wall ns, sim ns)
         self._anchor: tuple[int, int] | None = None
         if self.lockstep:
@@ -337,15 +344,19 @@ class SimNode(Node):
         stamp_ns = self.now_ns
         stamp = time_from_ns(stamp_ns)
         st = self.sim.state()
-        self._pub_clock.publish(Clock(clock=stamp))
-        self._pub_joints.publish(joint_state_to_msg(
-            stamp, self.sim.joint_names, st.joint_positions, st.joint_velocities, st.tau))
-        self._pub_odom.publish(odometry_to_msg(
-            stamp, st.base_position, st.base_quaternion, st.base_linear_velocity,
-            st.base_angular_velocity, frame_id="odom", child_frame_id=self.base_link))
+        msgs = (Clock(clock=stamp),
+                joint_state_to_msg(stamp, self.sim.joint_names, st.joint_positions,
+                                   st.joint_velocities, st.tau),
+                odometry_to_msg(stamp, st.base_position, st.base_quaternion,
+                                st.base_linear_velocity, st.base_angular_velocity,
+                                frame_id="odom", child_frame_id=self.base_link))
+        for pub, msg in zip((self._pub_clock, self._pub_joints, self._pub_odom), msgs,
+                            strict=True):
+            pub.publish(msg)
         if awaiting:
             self.awaiting_stamp_ns = stamp_ns
             self._deadline = self._wall_deadline()
+            self._awaited = (time.monotonic() + LOCKSTEP_RESEND, msgs)
         return stamp_ns
 
     def _wall_deadline(self, at_least: float = 0.0) -> float:
@@ -429,6 +440,13 @@ class SimNode(Node):
                        f"{self.awaiting_stamp_ns / NS_PER_S:.3f} s within "
                        f"{self.lockstep_timeout:g} s (wall); continuing with the last command")
             self.step_once()
+        elif self.awaiting_stamp_ns is not None and time.monotonic() >= self._awaited[0]:
+            msgs = self._awaited[1]  # the awaited state again, as it was
+            self._awaited = (time.monotonic() + LOCKSTEP_RESEND, msgs)
+            for pub, msg in zip((self._pub_clock, self._pub_joints, self._pub_odom), msgs,
+                                strict=True):
+                pub.publish(msg)
+            self.resends += 1
 
     def _on_free_timer(self) -> None:
         chunk = self._steps_per_state

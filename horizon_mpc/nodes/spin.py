@@ -154,8 +154,8 @@ def unmatched_params_file_sections(argv: Sequence[str], fqn: str,
         try:
             with open(path, encoding="utf-8") as fh:
                 data = yaml.safe_load(fh)
-        except (OSError, yaml.YAMLError):
-            continue
+        except (OSError, yaml.YAMLError, ValueError, RecursionError):
+            continue  # (rcl reads the file; this check only adds a warning)
         # a file shared by this package's nodes (README: one file for both) holds the
         # other node's section: that one is no mistake
         namespace = fqn.rsplit("/", 1)[0]
