@@ -98,7 +98,8 @@ def _checked_value(key: str, value: Any, default: Any, nullable: bool = False,
     if value is None and nullable:
         return None
     is_number = _finite_number(value)
-    if default is None and ("float" in kind or "int" in kind) and "list" not in kind \
+    if default is None and ("float" in kind or "int" in kind) and not any(
+            k in kind for k in ("list", "dict", "tuple", "Sequence")) \
             and not is_number:  # a nullable number (a list, a mapping were taken)
         raise bad("a number (or null)")
     if isinstance(default, bool):
