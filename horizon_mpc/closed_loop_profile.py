@@ -148,15 +148,10 @@ def load_pushes(path: str | Path) -> list[Push]:
                 set(item) - {"time", "force", "duration"}):
             raise ValueError(f"{where} needs 'time', 'force' [fx, fy, fz] and optionally "
                              f"'duration', got {item!r}")
-        force = item["force"]
-        try:
-            push = Push(_number(item["time"], "time"),
-                        tuple(_number(f, "force") for f in force)
-                        if isinstance(force, list) else force,
-                        _number(item.get("duration", 0.1), "duration"))
+        try:  # (Push checks and converts its values)
+            pushes.append(Push(item["time"], item["force"], item.get("duration", 0.1)))
         except ValueError as exc:
             raise ValueError(f"{where}: {exc}") from None
-        pushes.append(push)
     return pushes
 
 
@@ -183,8 +178,8 @@ def load_profile(path: str | Path) -> list[Segment]:
         if unknown or "duration" not in item:
             raise ValueError(f"{where} needs 'duration' and only vx/vy/wz, got "
                              f"{sorted(map(str, item))}")
-        try:
-            segs.append(Segment(**{k: _number(v, k) for k, v in item.items()}))
+        try:  # (Segment checks and converts its values)
+            segs.append(Segment(**item))
         except ValueError as exc:
             raise ValueError(f"{where}: {exc}") from None
     return segs

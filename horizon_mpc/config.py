@@ -36,8 +36,8 @@ import numpy as np
 import yaml
 
 __all__ = ["RobotConfig", "SimGains", "check_settings", "config_dirs", "field_default",
-           "find_config_file", "load_robot_config", "merged", "nearest_name", "parse_yaml",
-           "read_yaml"]
+           "find_config_file", "finite_number", "load_robot_config", "merged",
+           "nearest_name", "numeric_type", "parse_yaml", "read_yaml"]
 
 log = logging.getLogger(__name__)
 
@@ -221,15 +221,13 @@ def check_settings(settings: object, positive: tuple[str, ...] = (),
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"setting {name!r} must be true or false, got {value!r}")
             continue
-        kind = str(f.type)
-        number = ("float" in kind or "int" in kind) and not any(
-            k in kind for k in ("list", "dict", "tuple", "Sequence"))
-        if (value is None or (isinstance(value, (list, tuple, dict)) and not number)
+        if (value is None or (isinstance(value, (list, tuple, dict))
+                              and not numeric_type(str(f.type)))
                 or dataclasses.is_dataclass(value) or isinstance(default, str)):
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"setting {name!r} must be a number, got {value!r}")
-        if not _finite(value):
+        if not finite_number(value):
             raise ValueError(f"setting {name!r} must be finite, got {value!r}")
         if f.name in positive and not value > 0:
             raise ValueError(f"setting {name!r} must be > 0, got {value!r}")
@@ -237,12 +235,22 @@ def check_settings(settings: object, positive: tuple[str, ...] = (),
             raise ValueError(f"setting {name!r} must be >= 0, got {value!r}")
 
 
-def _finite(value: float) -> bool:
-    """``math.isfinite``, False for an int beyond a float's range (an OverflowError)."""
+def finite_number(value: Any) -> bool:
+    """A finite int or float, not a bool (an int beyond a float's range is none: it was an
+    OverflowError)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
     try:
         return math.isfinite(value)
     except OverflowError:
         return False
+
+
+def numeric_type(kind: str) -> bool:
+    """Whether a dataclass field's type (its text, ``float | None``) is a number, not a
+    sequence or mapping of them."""
+    return ("float" in kind or "int" in kind) and not any(
+        k in kind for k in ("list", "dict", "tuple", "Sequence"))
 
 
 _KNOWN = {"robot", "urdf_path", "base_link", "feet", "nominal_posture", "nominal_joints",

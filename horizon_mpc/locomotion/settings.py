@@ -12,7 +12,13 @@ from typing import Any
 
 import numpy as np
 
-from horizon_mpc.config import RobotConfig, check_settings, field_default, merged
+from horizon_mpc.config import (
+    RobotConfig,
+    check_settings,
+    field_default,
+    finite_number,
+    merged,
+)
 from horizon_mpc.locomotion.command import DEFAULT_MAX_NORM
 from horizon_mpc.locomotion.gaits import GAITS, Gait, make_gait
 
@@ -119,10 +125,10 @@ class Weights:
             if isinstance(default, list):
                 if not (isinstance(value, (list, tuple, np.ndarray)) and _flat(value)
                         and len(value) == len(default)
-                        and all(_number(x) and 0 <= x <= MAX_WEIGHT for x in value)):
+                        and all(finite_number(x) and 0 <= x <= MAX_WEIGHT for x in value)):
                     raise ValueError(f"setting {name!r} must be {len(default)} numbers in "
                                      f"[0, {MAX_WEIGHT:g}] (one per row), got {value!r}")
-            elif not (_number(value) and 0 <= value <= MAX_WEIGHT):
+            elif not (finite_number(value) and 0 <= value <= MAX_WEIGHT):
                 raise ValueError(f"setting {name!r} must be a number in [0, {MAX_WEIGHT:g}], "
                                  f"got {value!r}")
 
@@ -213,7 +219,7 @@ class MpcSettings:
         for name, top in (("max_velocity", MAX_VELOCITY), ("max_acceleration", math.inf)):
             value = getattr(self, name)
             if not (isinstance(value, (list, tuple)) and len(value) == 3 and all(
-                    _number(x) and 0 <= x <= top for x in value)):
+                    finite_number(x) and 0 <= x <= top for x in value)):
                 within = ">= 0" if top == math.inf else f"in [0, {top:g}]"
                 raise ValueError(f"'mpc.{name}' must be 3 numbers {within} (vx, vy, wz), got "
                                  f"{value!r}")
@@ -258,15 +264,6 @@ def _check(data: dict, cls: type, where: str) -> None:
 def _flat(value: Any) -> bool:
     """A flat sequence (a ragged one was numpy's 'setting an array element' error)."""
     return all(not isinstance(x, (list, tuple, dict, np.ndarray)) for x in value)
-
-
-def _number(x: Any) -> bool:
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        return False
-    try:
-        return math.isfinite(x)
-    except OverflowError:  # an integer beyond a float's range
-        return False
 
 
 def _checked(data: Any, cls: type, where: str) -> dict:

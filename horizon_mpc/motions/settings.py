@@ -16,7 +16,6 @@ The file is looked up like the robot configs (:func:`horizon_mpc.config.config_d
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -24,7 +23,9 @@ from horizon_mpc.config import (
     check_settings,
     field_default,
     find_config_file,
+    finite_number,
     merged,
+    numeric_type,
     read_yaml,
 )
 
@@ -67,41 +68,24 @@ class MotionConfig:
                     f" (a config of the {self.motion!r} motion?)")
             raise ValueError(f"{where}: unknown setting(s) {given or unknown} for motion "
                              f"{motion!r}{hint}; known: {sorted(fields)}")
-        return cls(**{k: _checked_value(k, v, field_default(fields[k]),
-                                        "None" in str(fields[k].type), str(fields[k].type))
+        return cls(**{k: _checked_value(k, v, field_default(fields[k]), str(fields[k].type))
                       for k, v in values.items()})
 
 
-
-
-def _finite_number(value: Any) -> bool:
-    """A finite int or float, not a bool (an int beyond a float's range is none: it was an
-    OverflowError)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return False
-    try:
-        return math.isfinite(value)
-    except OverflowError:
-        return False
-
-
-def _checked_value(key: str, value: Any, default: Any, nullable: bool = False,
-                   kind: str = "") -> Any:
+def _checked_value(key: str, value: Any, default: Any, kind: str = "") -> Any:
     """``value`` as the kind of ``default`` (an int for an int setting, a float for a float
     one, a list for a list one); ValueError naming ``key`` otherwise. Settings without a
-    default (or a None one) are passed as given; so is None for a setting whose type allows
-    it (``nullable``: the leap's ``trunk_clearance``, None for no clearance); a nullable
-    number (``kind``, the field's type, names float or int) must be one."""
+    default (or a None one) are passed as given; so is None for a setting whose type
+    (``kind``, its text) allows it (the leap's ``trunk_clearance``, None for no clearance);
+    a nullable number must be one."""
     def bad(kind: str) -> ValueError:
         return ValueError(f"setting {key!r} must be {kind}, got {value!r}")
 
-    if value is None and nullable:
+    if value is None and "None" in kind:
         return None
-    is_number = _finite_number(value)
-    if default is None and ("float" in kind or "int" in kind) and not any(
-            k in kind for k in ("list", "dict", "tuple", "Sequence")) \
-            and not is_number:  # a nullable number (a list, a mapping were taken)
-        raise bad("a number (or null)")
+    is_number = finite_number(value)
+    if default is None and numeric_type(kind) and not is_number:
+        raise bad("a number (or null)")  # (a list, a mapping were taken)
     if isinstance(default, bool):
         if not isinstance(value, bool):
             raise bad("true or false")

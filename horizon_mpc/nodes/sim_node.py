@@ -350,14 +350,18 @@ class SimNode(Node):
                 odometry_to_msg(stamp, st.base_position, st.base_quaternion,
                                 st.base_linear_velocity, st.base_angular_velocity,
                                 frame_id="odom", child_frame_id=self.base_link))
-        for pub, msg in zip((self._pub_clock, self._pub_joints, self._pub_odom), msgs,
-                            strict=True):
-            pub.publish(msg)
+        self._send(msgs)
         if awaiting:
             self.awaiting_stamp_ns = stamp_ns
             self._deadline = self._wall_deadline()
             self._awaited = (time.monotonic() + LOCKSTEP_RESEND, msgs)
         return stamp_ns
+
+    def _send(self, msgs: tuple[Clock, JointState, Odometry]) -> None:
+        """Publish a state's /clock, joint_states and odom messages, in that order."""
+        self._pub_clock.publish(msgs[0])
+        self._pub_joints.publish(msgs[1])
+        self._pub_odom.publish(msgs[2])
 
     def _wall_deadline(self, at_least: float = 0.0) -> float:
         """lockstep_timeout (or ``at_least`` s, if longer) from now; never with 0."""
@@ -443,9 +447,7 @@ class SimNode(Node):
         elif self.awaiting_stamp_ns is not None and time.monotonic() >= self._awaited[0]:
             msgs = self._awaited[1]  # the awaited state again, as it was
             self._awaited = (time.monotonic() + LOCKSTEP_RESEND, msgs)
-            for pub, msg in zip((self._pub_clock, self._pub_joints, self._pub_odom), msgs,
-                                strict=True):
-                pub.publish(msg)
+            self._send(msgs)
             self.resends += 1
 
     def _on_free_timer(self) -> None:
