@@ -46,7 +46,12 @@ from horizon_mpc.nodes.conversions import (
     time_to_ns,
 )
 from horizon_mpc.nodes.mpc_inputs import (
+    ABSURD_ANGULAR,
     ABSURD_COMMAND,
+    ABSURD_JOINT_VELOCITY,
+    ABSURD_LINEAR,
+    ABSURD_POSITION,
+    JOINT_LIMIT_MARGIN,
     base_from_odometry,
     command_from_twist,
     joints_from_joint_state,
@@ -158,6 +163,61 @@ def test_joint_readings_far_outside_the_limits_or_absurdly_fast_are_refused_by_n
     fast = JointState(name=JOINTS, position=[0.0, 0.0, -1.5], velocity=[0.0, 5e3, 0.0])
     with pytest.raises(ValueError, match=r"velocities beyond 1000: b=5000"):
         joints_from_joint_state(fast, JOINTS, limits)
+
+
+near_limits = st.one_of(floats, st.sampled_from([-1.5, 1.5, -1.5000001, 1.5000001, 1e3,
+                                                  -1e3, 1000.0000001]))
+
+
+@given(pos=st.lists(near_limits, min_size=3, max_size=3),
+       vel=st.lists(near_limits, min_size=3, max_size=3))
+def test_joint_readings_are_accepted_exactly_by_the_documented_rule(pos, vel):
+    """The checks run first on the whole arrays (a fast path, session 31) and name the
+    problem only when those fail: accepted iff every position is finite and within
+    JOINT_LIMIT_MARGIN of its limits and every finite velocity within
+    ABSURD_JOINT_VELOCITY; non-finite velocities are zeroed with a note."""
+    limits = (np.full(3, -1.0), np.array([1.0, 1.0, math.inf]))
+    msg = JointState(name=JOINTS, position=pos, velocity=vel)
+    pos_ok = all(math.isfinite(x) and lo - JOINT_LIMIT_MARGIN <= x <= hi + JOINT_LIMIT_MARGIN
+                 for x, lo, hi in zip(pos, *limits, strict=True))
+    vel_ok = all(not math.isfinite(x) or abs(x) <= ABSURD_JOINT_VELOCITY for x in vel)
+    try:
+        qj, vj, notes = joints_from_joint_state(msg, JOINTS, limits)
+    except ValueError as exc:
+        assert not (pos_ok and vel_ok)
+        assert ("non-finite positions" in str(exc) or "outside the joint limits" in str(exc)
+                if not pos_ok else "velocities beyond 1000" in str(exc))
+        return
+    assert pos_ok and vel_ok
+    assert qj.tolist() == pos
+    assert vj.tolist() == [x if math.isfinite(x) else 0.0 for x in vel]
+    assert any("non-finite velocities" in n for n in notes) == (
+        not all(map(math.isfinite, vel)))
+
+
+@given(values=st.lists(st.one_of(floats, st.sampled_from([1e5, -1e5, 100.0, -100.0,
+                                                           100.00000001, 1e-7])),
+                       min_size=13, max_size=13))
+def test_odometry_is_accepted_exactly_by_the_documented_rule(values):
+    """As the joints: accepted iff finite, position within ABSURD_POSITION (m), twist within
+    ABSURD_LINEAR / ABSURD_ANGULAR, and a quaternion not (near) zero."""
+    msg = Odometry()
+    p, o, tw = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
+    (p.x, p.y, p.z, o.x, o.y, o.z, o.w, tw.linear.x, tw.linear.y, tw.linear.z,
+     tw.angular.x, tw.angular.y, tw.angular.z) = values
+    position, quat, linear, angular = values[:3], values[3:7], values[7:10], values[10:]
+    ok = (all(map(math.isfinite, values)) and max(map(abs, position)) <= ABSURD_POSITION
+          and max(map(abs, linear)) <= ABSURD_LINEAR
+          and max(map(abs, angular)) <= ABSURD_ANGULAR and max(map(abs, quat)) >= 1e-6)
+    try:
+        pos, unit, lin, ang, _ = base_from_odometry(msg)
+    except ValueError as exc:
+        assert not ok, exc
+        return
+    assert ok
+    assert (pos.tolist(), lin.tolist(), ang.tolist()) == (position, linear, angular)
+    np.testing.assert_allclose(unit * np.linalg.norm(quat), quat, atol=1e-12 * max(
+        map(abs, quat)), rtol=1e-12)
 
 
 def test_odometry_of_absurd_magnitude_is_refused_and_an_upside_down_base_noted():

@@ -170,32 +170,52 @@ def joints_from_joint_state(
     if len(msg.effort) not in (0, len(names)):  # not used: said, not refused
         notes.append(LayoutNote(f"JointState.effort has {len(msg.effort)} values for "
                                 f"{len(names)} names (efforts are not used)"))
+    # the checks of a good reading first, in few numpy calls (a node reads every state a
+    # driver sends, 500 Hz from the simulator); the details only when one fails
     qj = pos[idx]
-    if not np.all(np.isfinite(qj)):
-        bad = [n for n, x in zip(joint_names, qj, strict=True) if not math.isfinite(x)]
-        raise ValueError(f"JointState has non-finite positions for {bad}")
-    if limits is not None:
-        lo, hi = limits
-        out = (qj < lo - JOINT_LIMIT_MARGIN) | (qj > hi + JOINT_LIMIT_MARGIN)
-        if out.any():
-            bad = [f"{n}={x:g} (limits [{a:g}, {b:g}])" for n, x, a, b, o in
-                   zip(joint_names, qj, lo, hi, out, strict=True) if o]
-            raise ValueError(f"JointState positions far outside the joint limits: "
-                             f"{', '.join(bad)}")
+    if limits is None:
+        good = np.isfinite(qj).all()
+    else:
+        good = ((qj >= limits[0] - JOINT_LIMIT_MARGIN)
+                & (qj <= limits[1] + JOINT_LIMIT_MARGIN)).all()  # NaN fails too
+    if not good:
+        _refuse_positions(qj, joint_names, limits)
     if not vel.size:
         notes.append("JointState has no velocities; using zeros")
         return qj, np.zeros(len(idx)), notes
     vj = vel[idx]
-    if not np.all(np.isfinite(vj)):
+    if not (np.abs(vj) <= ABSURD_JOINT_VELOCITY).all():  # NaN fails too
+        vj = _repaired_velocities(vj, joint_names, notes)
+    return qj, vj, notes
+
+
+def _refuse_positions(qj: np.ndarray, joint_names: Sequence[str],
+                      limits: tuple[np.ndarray, np.ndarray] | None) -> None:
+    """Raise the ValueError naming the non-finite or far out-of-limits positions."""
+    if not np.isfinite(qj).all():
+        bad = [n for n, x in zip(joint_names, qj, strict=True) if not math.isfinite(x)]
+        raise ValueError(f"JointState has non-finite positions for {bad}")
+    lo, hi = limits
+    out = (qj < lo - JOINT_LIMIT_MARGIN) | (qj > hi + JOINT_LIMIT_MARGIN)
+    bad = [f"{n}={x:g} (limits [{a:g}, {b:g}])" for n, x, a, b, o in
+           zip(joint_names, qj, lo, hi, out, strict=True) if o]
+    raise ValueError(f"JointState positions far outside the joint limits: {', '.join(bad)}")
+
+
+def _repaired_velocities(vj: np.ndarray, joint_names: Sequence[str],
+                         notes: list[str]) -> np.ndarray:
+    """``vj`` with non-finite velocities zeroed (noted); raises the ValueError naming those
+    beyond :data:`ABSURD_JOINT_VELOCITY`."""
+    if not np.isfinite(vj).all():
         bad = [n for n, x in zip(joint_names, vj, strict=True) if not math.isfinite(x)]
         notes.append(f"JointState has non-finite velocities for {bad}; using zeros for those")
         vj = np.where(np.isfinite(vj), vj, 0.0)
-    if np.any(np.abs(vj) > ABSURD_JOINT_VELOCITY):
+    if (np.abs(vj) > ABSURD_JOINT_VELOCITY).any():
         bad = [f"{n}={x:g}" for n, x in zip(joint_names, vj, strict=True)
                if abs(x) > ABSURD_JOINT_VELOCITY]
         raise ValueError(f"JointState velocities beyond {ABSURD_JOINT_VELOCITY:g}: "
                          f"{', '.join(bad)}")
-    return qj, vj, notes
+    return vj
 
 
 def base_from_odometry(
@@ -212,23 +232,20 @@ def base_from_odometry(
     """
     p, o = msg.pose.pose.position, msg.pose.pose.orientation
     lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
-    parts = (("position", [p.x, p.y, p.z]), ("orientation", [o.x, o.y, o.z, o.w]),
-             ("linear twist", [lin.x, lin.y, lin.z]), ("angular twist", [ang.x, ang.y, ang.z]))
-    for what, values in parts:
-        if not all(map(math.isfinite, values)):
-            raise ValueError(f"Odometry {what} is not finite: {[float(x) for x in values]}")
-    pos, quat, v_lin, v_ang = (np.array(values, dtype=float) for _, values in parts)
-    for what, x, bound in (("position", pos, ABSURD_POSITION),
-                           ("linear twist", v_lin, ABSURD_LINEAR),
-                           ("angular twist", v_ang, ABSURD_ANGULAR)):
-        if np.max(np.abs(x)) > bound:
-            raise ValueError(f"Odometry {what} {x.tolist()} is beyond the plausible {bound:g}")
-    scale = float(np.max(np.abs(quat)))  # normalise in two steps: |q|^2 may overflow
+    position, orientation = (p.x, p.y, p.z), (o.x, o.y, o.z, o.w)
+    linear, angular = (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z)
+    # a good reading in plain floats (a node reads every state a driver sends); the
+    # checks that name the problem only when these fail (NaN fails every comparison)
+    if not (_within(position, ABSURD_POSITION) and all(map(math.isfinite, orientation))
+            and _within(linear, ABSURD_LINEAR) and _within(angular, ABSURD_ANGULAR)):
+        _refuse_odometry(position, orientation, linear, angular)
+    scale = max(map(abs, orientation))  # normalise in two steps: |q|^2 may overflow
     if scale < 1e-6:
-        raise ValueError(f"Odometry orientation is a zero quaternion {quat.tolist()}")
-    unit = quat / scale
-    unit /= np.linalg.norm(unit)
-    norm = scale * float(np.linalg.norm(quat / scale))
+        raise ValueError(f"Odometry orientation is a zero quaternion {list(orientation)}")
+    scaled = [c / scale for c in orientation]
+    scaled_norm = math.sqrt(sum(c * c for c in scaled))
+    unit = np.array(scaled) / scaled_norm
+    norm = scale * scaled_norm
     notes = []
     if abs(norm - 1.0) > QUATERNION_TOLERANCE:
         notes.append(f"Odometry orientation has norm {norm:.6g}; normalised")
@@ -236,4 +253,24 @@ def base_from_odometry(
     if 1.0 - 2.0 * (x * x + y * y) < 0.0:  # the base z-axis points down
         notes.append("Odometry orientation has the base upside down: the walking plan "
                      "cannot recover from that")
-    return pos, unit, v_lin, v_ang, notes
+    return np.array(position), unit, np.array(linear), np.array(angular), notes
+
+
+def _within(values: tuple[float, ...], bound: float) -> bool:
+    return all(-bound <= x <= bound for x in values)
+
+
+def _refuse_odometry(position: tuple, orientation: tuple, linear: tuple,
+                     angular: tuple) -> None:
+    """Raise the ValueError naming the first non-finite or implausible part of an odom."""
+    parts = (("position", position), ("orientation", orientation),
+             ("linear twist", linear), ("angular twist", angular))
+    for what, values in parts:
+        if not all(map(math.isfinite, values)):
+            raise ValueError(f"Odometry {what} is not finite: {[float(x) for x in values]}")
+    for what, values, bound in (("position", position, ABSURD_POSITION),
+                                ("linear twist", linear, ABSURD_LINEAR),
+                                ("angular twist", angular, ABSURD_ANGULAR)):
+        if not _within(values, bound):
+            raise ValueError(f"Odometry {what} {[float(x) for x in values]} is beyond the "
+                             f"plausible {bound:g}")
