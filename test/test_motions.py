@@ -390,6 +390,10 @@ def test_cli_a_walk_shorter_than_two_ticks_is_an_error(capsys):
     ("robots: {go2: 5}\n", "'robots' must map robot names"),
     ("robots: [go2]\n", "'robots' must map robot names"),
     ("solver: snopt\n", "unknown solver 'snopt'"),
+    # became the robot 'None' ("no robot config 'None'") and the solver 'None' (a reviewer)
+    ("robot: null\n", "'robot' must be a robot name, got None"),
+    ("robot: [go2]\n", "'robot' must be a robot name, got ['go2']"),
+    ("solver: 3\n", "'solver' must be a solver name, got 3"),
 ])
 def test_a_malformed_motion_config_is_one_error_line(tmp_path, capsys, body, text):
     from horizon_mpc.motions.cli import main
@@ -415,6 +419,23 @@ def test_a_walk_that_breaks_the_physics_is_not_solved(tmp_path, capsys):
     # what it executed breaks the physics, or its first horizon never converged
     assert (summary["results"]["max_dynamics_defect"] > 1e-6
             or stats["status"].startswith("bootstrap"))
+
+
+def test_a_misspelt_robot_under_robots_is_warned_about(tmp_path, caplog):
+    """`robots: {sol12: ...}` dropped its settings for solo12 without a word; another
+    robot's entry (go1 beside go2) is no typo, and the entry of the robot run none."""
+    from horizon_mpc.motions.settings import load_motion_config
+
+    path = tmp_path / "leap.yaml"
+    path.write_text("robots:\n  sol12: {distance: 0.2}\n  go1: {distance: 0.3}\n")
+    mc = load_motion_config(path)
+    with caplog.at_level("WARNING", logger="horizon_mpc.motions.settings"):
+        assert mc.settings_for(LeapSettings, "solo12").distance == LeapSettings().distance
+        assert mc.settings_for(LeapSettings, "go2").distance == LeapSettings().distance
+        assert mc.settings_for(LeapSettings, "go1").distance == 0.3
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{path}: robots: 'sol12' is no robot config and not 'solo12', the robot run: a "
+        "misspelling? Its settings are not used"]
 
 
 def test_motion_settings_take_whole_floats_and_ints_as_their_kinds():

@@ -16,6 +16,7 @@ The file is looked up like the robot configs (:func:`horizon_mpc.config.config_d
 from __future__ import annotations
 
 import dataclasses
+import logging
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -25,11 +26,14 @@ from horizon_mpc.config import (
     find_config_file,
     finite_number,
     merged,
+    nearest_name,
     numeric_type,
     read_yaml,
 )
 
 __all__ = ["MotionConfig", "check_settings", "load_motion_config", "motion_settings"]
+
+log = logging.getLogger(__name__)
 
 T = TypeVar("T")
 SOLVERS = ("ipopt", "gnsqp", "ilqr")
@@ -55,8 +59,10 @@ class MotionConfig:
                 or a value of another kind than the setting's default (a number where a
                 whole number is due, text for a number, ...: named with the key).
         """
-        values = merged(self.settings, self.robots.get(robot or self.robot, {}),
-                         overrides or {})
+        robot = robot or self.robot
+        if robot not in self.robots:
+            self._warn_misspelt(robot)
+        values = merged(self.settings, self.robots.get(robot, {}), overrides or {})
         fields = {f.name: f for f in dataclasses.fields(cls)}
         unknown = sorted(str(k) for k in set(values) - set(fields))
         if unknown:
@@ -70,6 +76,19 @@ class MotionConfig:
                              f"{motion!r}{hint}; known: {sorted(fields)}")
         return cls(**{k: _checked_value(k, v, field_default(fields[k]), str(fields[k].type))
                       for k, v in values.items()})
+
+    def _warn_misspelt(self, robot: str) -> None:
+        """Warn when an entry under ``robots:`` that names no robot config is a typo of
+        ``robot`` (``sol12`` for solo12: its settings were dropped without a word). Not an
+        error: a robot config given by path may have a name of its own."""
+        for key in self.robots:
+            if nearest_name(key, [robot]) is not None:
+                try:
+                    find_config_file(key)
+                except FileNotFoundError:
+                    log.warning("%s: robots: %r is no robot config and not %r, the robot run: "
+                                "a misspelling? Its settings are not used",
+                                self.source or self.motion, key, robot)
 
 
 def _checked_value(key: str, value: Any, default: Any, kind: str = "") -> Any:
@@ -127,12 +146,15 @@ def load_motion_config(motion: str | Path) -> MotionConfig:
     if not isinstance(robots, dict) or not all(isinstance(v, dict) or v is None
                                                for v in robots.values()):
         raise ValueError(f"{path}: 'robots' must map robot names to mappings of settings")
-    solver = str(data.get("solver", "ipopt"))
+    for key in ("robot", "solver"):
+        if key in data and not (isinstance(data[key], str) and data[key]):
+            raise ValueError(f"{path}: {key!r} must be a {key} name, got {data[key]!r}")
+    solver = data.get("solver", "ipopt")
     if solver not in SOLVERS:
         raise ValueError(f"{path}: unknown solver {solver!r}; solvers: {list(SOLVERS)}")
     return MotionConfig(
         motion=path.stem,
-        robot=str(data.get("robot", "go2")),
+        robot=data.get("robot", "go2"),
         solver=solver,
         settings=dict(settings),
         robots={str(k): dict(v or {}) for k, v in robots.items()},
