@@ -353,7 +353,8 @@ def walk_warnings(summary: dict) -> list[str]:
     """What to say of a walk (nothing for the other motions) whose success is the
     problem's (converged, physically consistent) but not what was asked: a mean velocity
     more than :data:`VELOCITY_ERROR_WARNING` off its reference, swing feet that rise less
-    than :data:`SWING_APEX_WARNING` of the gait's step height (they skim the ground)."""
+    than :data:`SWING_APEX_WARNING` of the gait's step height (they skim the ground), or a
+    gait that swings feet with a step height of 0."""
     out = []
     error = summary.get("velocity_error")
     if isinstance(error, float) and error > VELOCITY_ERROR_WARNING:
@@ -369,6 +370,9 @@ def walk_warnings(summary: dict) -> list[str]:
         out.append(f"the swing feet rise at most {apex[1] * 100:.2f} cm for a step_height of "
                    f"{height * 100:.2f} cm: they skim the ground (the clearance is a cost: "
                    "mpc.weights.swing_height against the others)")
+    elif apex and height == 0.0:
+        out.append(f"step_height is 0: the swing feet are not lifted (they rise at most "
+                   f"{apex[1] * 100:.2f} cm, sliding or skimming the ground)")
     return out
 
 
