@@ -292,6 +292,12 @@ def test_mimic_joints_are_named_in_a_warning(caplog):
         RobotModel.from_urdf(urdf.replace('<mimic joint="j1" multiplier="2"/>', ""),
                              floating_base=False)
     assert "mimic" not in caplog.text
+    # a fixed joint's mimic (talos' gripper has six) moves nothing: not named (it was)
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="horizon_mpc.model.loading"):
+        m = RobotModel.from_urdf(urdf.replace('name="j2" type="revolute"',
+                                              'name="j2" type="fixed"'), floating_base=False)
+    assert m.joint_names == ["j1"] and "mimic" not in caplog.text
 
 
 @pytest.mark.parametrize("name", ROBOTS)

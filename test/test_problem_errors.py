@@ -126,6 +126,23 @@ def test_unknown_transcription_and_integrator_list_the_choices(prb):
         prb.transcribe("multiple_shooting", integrator="rk5")
 
 
+def test_the_argument_a_transcription_does_not_use_is_warned_about(prb, recwarn):
+    """An auditor asked for an Euler collocation and got Legendre's without a word."""
+    with pytest.warns(UserWarning, match=r"direct_collocation: integrator 'euler' is not used "
+                      r"\(the collocation polynomial integrates the dynamics\)"):
+        prb.transcribe("direct_collocation", integrator="euler", degree=2)
+    assert (prb.transcription, prb.collocation_degree) == ("direct_collocation", 2)
+    with pytest.warns(UserWarning, match=r"multiple_shooting: degree 5 is not used"):
+        prb.transcribe("multiple_shooting", degree=5)
+    assert prb.integrator_name == "rk4"
+    recwarn.clear()
+    prb.transcribe("direct_collocation", degree=4)  # the defaults and the arguments used:
+    prb.transcribe("direct_collocation")             # no word
+    prb.transcribe("multiple_shooting", integrator="euler")
+    assert not [w for w in recwarn if issubclass(w.category, UserWarning)]
+    assert (prb.integrator_name, prb.collocation_degree) == ("euler", 3)
+
+
 def test_solving_without_dt_says_so():
     p = Problem(3)
     x = p.create_state_variable("x", 1)

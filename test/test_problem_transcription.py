@@ -21,7 +21,10 @@ def small_problem(method: str = "multiple_shooting") -> tuple[Problem, dict]:
     r = prb.create_parameter("r", 1)
     prb.set_dynamics(cs.vertcat(x[1], u - x[0]))
     prb.set_dt(0.1)
-    prb.transcribe(method, integrator="rk4", degree=2)
+    if method == "direct_collocation":
+        prb.transcribe(method, degree=2)
+    else:
+        prb.transcribe(method, integrator="rk4")
     prb.create_cost("track", x[0] - r, weight=4.0)
     prb.create_cost("rate", u - u.offset(-1), nodes=range(2, N), weight=9.0)
     prb.create_constraint("box", x[1] + u, nodes=[1, 3], bounds=(-1.0, 2.0))

@@ -26,8 +26,9 @@ def cartpole_dynamics(q: cs.SX, v: cs.SX, u: cs.SX, m_cart: float = 1.0, m_pole:
 
 
 def build_cartpole(n_nodes: int = 100, duration: float = 2.0,
-                   transcription: str = "multiple_shooting", integrator: str = "rk4",
-                   degree: int = 3, u_max: float | None = None, cart_limit: float | None = None,
+                   transcription: str = "multiple_shooting",
+                   integrator: str | None = None, degree: int | None = None,
+                   u_max: float | None = None, cart_limit: float | None = None,
                    w_effort: float = 1.0, w_velocity: float = 1e-2,
                    ) -> tuple[Problem, dict]:
     """Cart-pole swing-up in ``duration`` seconds on ``n_nodes`` intervals.

@@ -15,8 +15,8 @@ __all__ = ["build_double_integrator", "double_integrator_optimum"]
 
 
 def build_double_integrator(n_nodes: int = 20, duration: float = 1.0, distance: float = 1.0,
-                            transcription: str = "multiple_shooting", integrator: str = "rk4",
-                            degree: int = 3) -> tuple[Problem, dict]:
+                            transcription: str = "multiple_shooting", integrator: str | None = None,
+                            degree: int | None = None) -> tuple[Problem, dict]:
     """The transfer on ``n_nodes`` intervals with piecewise-constant ``u``.
 
     Cost ``sum_k dt u_k^2`` (the exact integral of a piecewise-constant ``u``); start at

@@ -51,8 +51,8 @@ def energy_pumping_guess(n_nodes: int, tau_max: float, h: float = 1e-3,
 def build_pendulum_min_time(n_nodes: int = 50, tau_max: float = 5.0,
                             time_bounds: tuple[float, float] = (0.5, 6.0),
                             w_effort: float = 1e-2, guess: str = "pumping",
-                            transcription: str = "multiple_shooting", integrator: str = "rk4",
-                            degree: int = 3) -> tuple[Problem, dict]:
+                            transcription: str = "multiple_shooting", integrator: str | None = None,
+                            degree: int | None = None) -> tuple[Problem, dict]:
     """Swing the pendulum from rest down to rest upright as fast as ``|tau| <= tau_max``
     allows (``tau_max`` below ``m g l`` forces pumping swings).
 

@@ -87,8 +87,11 @@ def _warn_mimic_joints(text: str, source: str) -> None:
         root = ElementTree.fromstring(text.lstrip("\ufeff").encode())
     except ElementTree.ParseError:  # Pinocchio read it; nothing to say about mimics here
         return
+    # a fixed joint's mimic moves nothing (talos' gripper has six: the warning named joints
+    # the model does not have)
     pairs = [(joint.get("name", "?"), mimic.get("joint", "?"))
-             for joint in root.iter("joint") for mimic in joint.findall("mimic")]
+             for joint in root.iter("joint") if joint.get("type") != "fixed"
+             for mimic in joint.findall("mimic")]
     if pairs:
         log.warning("%s: mimic joints become independent joints of the model (%s); couple "
                     "them in your problem if they must move together", source,

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import math
+import warnings
 from collections.abc import Iterable
 
 import casadi as cs
@@ -246,18 +247,32 @@ class Problem:
         return self._dt
 
     def transcribe(self, method: str = "multiple_shooting",
-                   integrator: str | Integrator = "rk4", degree: int = 3) -> None:
-        """Choose the transcription (``multiple_shooting`` or ``direct_collocation``)."""
+                   integrator: str | Integrator | None = None, degree: int | None = None) -> None:
+        """Choose the transcription: ``multiple_shooting`` with ``integrator`` (default
+        ``rk4``), or ``direct_collocation`` with Legendre polynomials of ``degree`` (1..9,
+        default 3). The argument the method does not use is warned about when given (an
+        Euler collocation asked for was a Legendre one without a word)."""
         if method not in TRANSCRIPTIONS:
             raise ValueError(f"unknown transcription {method!r}; choose one of {TRANSCRIPTIONS}")
-        if method == "direct_collocation":
+        collocation = method == "direct_collocation"
+        if collocation:
+            degree = 3 if degree is None else degree
             if not isinstance(degree, (int, np.integer)) or not 1 <= degree <= 9:
                 raise ValueError(f"collocation degree must be an int in 1..9, got {degree!r}")
             self.check_transcription(method)
+        unused = (f"integrator {integrator if isinstance(integrator, str) else 'custom'!r}"
+                  if collocation and integrator is not None else
+                  f"degree {degree!r}" if not collocation and degree is not None else None)
+        if unused:
+            warnings.warn(f"{method}: {unused} is not used ("
+                          + ("the collocation polynomial integrates the dynamics"
+                             if collocation else "the degree is direct collocation's") + ")",
+                          UserWarning, stacklevel=2)
+        integrator = "rk4" if integrator is None or collocation else integrator
         self._integrator = get_integrator(integrator)
         self.integrator_name = integrator if isinstance(integrator, str) else "custom"
         self.transcription = method
-        self.collocation_degree = int(degree)
+        self.collocation_degree = int(degree) if collocation else 3
         self._revision += 1
 
     @property
