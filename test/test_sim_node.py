@@ -450,6 +450,57 @@ def test_lockstep_waits_for_the_answer_then_times_out(harness_factory):
     h.spin_until(lambda: len(h.joint_states) > n, timeout=0.15)
 
 
+def test_lockstep_answers_stamped_otherwise_are_named_when_the_wait_times_out(
+        harness_factory):
+    """mpc_node left on trigger 'timer' under a lockstep simulator answers each state with a
+    plan from the state before: every step waited out lockstep_timeout (8 s of sim time in
+    409 s) and the warning did not say that trajectories were coming (an auditor's)."""
+    h = harness_factory(lockstep=True, lockstep_timeout=5.0, control_period=0.01)
+    logged: list[str] = []
+    logger = h.sim.get_logger()
+
+    class Logger:
+        def warning(self, text: str) -> None:
+            logged.append(text)
+
+        def __getattr__(self, name: str):
+            return getattr(logger, name)
+
+    h.sim.get_logger = Logger
+    h.wait_until_connected()
+    for before in (0, 10_000_000):  # two states answered (a zero stamp is "now": it would)
+        h.spin_until(lambda b=before: h.sim.awaiting_stamp_ns is not None
+                     and h.sim.awaiting_stamp_ns >= b)
+        h.trajectory_pub.publish(trajectory(h.sim, h.sim.awaiting_stamp_ns))
+    h.spin_until(lambda: (h.sim.awaiting_stamp_ns or 0) >= 20_000_000)
+    assert logged == []
+    h.sim.lockstep_timeout = 0.2  # the next wait times out
+    h.sim._deadline = h.sim._wall_deadline()
+    awaited = h.sim.awaiting_stamp_ns
+    h.trajectory_pub.publish(trajectory(h.sim, awaited - 10_000_000))  # the state before's
+    h.spin_until(lambda: logged)
+    assert logged == [
+        f"no joint_trajectory answered the state stamped {awaited / 1e9:.3f} s within 0.2 s "
+        "(wall); continuing with the last command; 1 joint_trajectory message(s) came "
+        "meanwhile, the last stamped 0.010 s before it: a lockstep answer carries the stamp of "
+        "the state it answers (mpc_node: trigger 'state'; with trigger 'timer' it plans from "
+        "the state before)"]
+    assert h.sim.awaiting_stamp_ns > awaited and h.sim._off_stamp_text() == ""  # counted anew
+
+
+def test_a_lockstep_simulator_does_not_round_the_state_rate_it_does_not_use(context, capfd):
+    """'state_rate: 0.002 s is not a whole number of physics steps' at physics_rate 400 in
+    lockstep, where states go out once per control period (an auditor's)."""
+    said = {}
+    for lockstep in (True, False):
+        sim = SimNode(parameter_overrides=[Parameter("lockstep", value=lockstep),
+                                           Parameter("physics_rate", value=400.0)],
+                      context=context)
+        sim.destroy_node()
+        said[lockstep] = "state_rate: 0.002 s is not a whole number" in capfd.readouterr().err
+    assert said == {True: False, False: True}
+
+
 def test_bad_inputs_are_rejected_and_the_sim_keeps_running(harness_factory):
     h = harness_factory(realtime_factor=0.0)
     h.wait_until_connected()

@@ -221,7 +221,10 @@ class SimNode(Node):
         self.lockstep_timeout = par("lockstep_timeout")
         self.push_duration = par("push_duration")
         self._steps_per_state = max(1, round(physics_rate / par("state_rate")))
-        for name, steps, period in (("state_rate", self._steps_per_state, 1 / par("state_rate")),
+        # (lockstep publishes a state per control period, free running every state_rate)
+        for name, steps, period in (*(() if par("lockstep") else
+                                      (("state_rate", self._steps_per_state,
+                                        1 / par("state_rate")),)),
                                     ("control_period", self._steps_per_control,
                                      par("control_period")),
                                     *((name, delay_steps[name], delays[name])
@@ -353,6 +356,7 @@ class SimNode(Node):
         self._send(msgs)
         if awaiting:
             self.awaiting_stamp_ns = stamp_ns
+            self._off_stamp_answers = (0, 0)
             self._deadline = self._wall_deadline()
             self._awaited = (time.monotonic() + LOCKSTEP_RESEND, msgs)
         return stamp_ns
@@ -442,13 +446,28 @@ class SimNode(Node):
         if self.awaiting_stamp_ns is not None and time.monotonic() > self._deadline:
             self._warn("lockstep", f"no joint_trajectory answered the state stamped "
                        f"{self.awaiting_stamp_ns / NS_PER_S:.3f} s within "
-                       f"{self.lockstep_timeout:g} s (wall); continuing with the last command")
+                       f"{self.lockstep_timeout:g} s (wall); continuing with the last command"
+                       + self._off_stamp_text())
             self.step_once()
         elif self.awaiting_stamp_ns is not None and time.monotonic() >= self._awaited[0]:
             msgs = self._awaited[1]  # the awaited state again, as it was
             self._awaited = (time.monotonic() + LOCKSTEP_RESEND, msgs)
             self._send(msgs)
             self.resends += 1
+
+    def _off_stamp_text(self) -> str:
+        """Why an awaited state went unanswered when trajectories did come, stamped otherwise
+        (mpc_node left on trigger 'timer' plans from the state before the awaited one:
+        every step waited out lockstep_timeout, 8 s of sim time took 409 s, and nothing
+        said why)."""
+        n, offset_ns = self._off_stamp_answers
+        if not n:
+            return ""
+        when = (f"{-offset_ns / NS_PER_S:.3f} s before" if offset_ns < 0
+                else f"{offset_ns / NS_PER_S:.3f} s after")
+        return (f"; {n} joint_trajectory message(s) came meanwhile, the last stamped {when} "
+                "it: a lockstep answer carries the stamp of the state it answers (mpc_node: "
+                "trigger 'state'; with trigger 'timer' it plans from the state before)")
 
     def _on_free_timer(self) -> None:
         chunk = self._steps_per_state
@@ -497,6 +516,9 @@ class SimNode(Node):
         if release:
             self.awaiting_stamp_ns = None
             self.step_once()
+        elif self.lockstep and self.awaiting_stamp_ns is not None and stamp_ns:
+            self._off_stamp_answers = (self._off_stamp_answers[0] + 1,
+                                       stamp_ns - self.awaiting_stamp_ns)
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
         link = msg.header.frame_id or self.base_link
