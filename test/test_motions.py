@@ -497,6 +497,18 @@ def test_pinocchio_dynamics_reproduce_the_states_and_the_base_wrench_vanishes(mo
 
 @pytest.mark.slow
 @pytest.mark.parametrize("motion", ["leap", "turn", "walk"])
+def test_every_solved_motion_is_reported_without_a_false_warning(motion, request):
+    """The CLI's warnings of each motion's real summary: every CLI turn ended in a
+    TypeError after writing its outputs (its per-foot swing apexes went through the walk's
+    check, session 30), exit code 1 for a solved turn (an auditor's)."""
+    from horizon_mpc.motions.cli import motion_warnings
+
+    res, st, *_ = request.getfixturevalue(motion)
+    assert motion_warnings(motion, res.summary, st) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("motion", ["leap", "turn", "walk"])
 def test_every_motion_summary_has_the_physics_checks(motion, request):
     res, _, model, *_ = request.getfixturevalue(motion)
     s = res.summary
@@ -943,6 +955,54 @@ def test_a_walk_far_from_its_velocity_reference_or_skimming_the_ground_is_warned
         "step_height is 0: the swing feet are not lifted (they rise at most 0.04 cm, sliding "
         "or skimming the ground)"]
     assert walk_warnings({"final_yaw": 1.57}) == []  # a leap, a turn
+
+
+def test_only_a_walk_gets_the_walk_warnings_and_the_torque_warning_names_what_exists():
+    """A turn's summary (per-foot swing apexes, a step height) went through the walk's
+    checks: a TypeError after every CLI turn. The walk, which has no torque_limit_scale,
+    was told 'torque_limit_scale None'."""
+    from horizon_mpc.motions.cli import motion_warnings
+
+    turn = {"swing_apex": [[0.1, 0.1]] * 4, "step_height": 0.1, "max_torque_ratio": 0.9}
+    assert motion_warnings("turn", turn, TurnSettings()) == []
+    over = {**turn, "max_torque_ratio": 1.08}
+    assert motion_warnings("turn", over, TurnSettings(torque_limit_scale=0.8)) == [
+        "the plan's torques reach 1.08 times the URDF effort limits (torque_limit_scale "
+        "0.8): more than the robot's motors are rated for"]
+    walk = {"velocity_reference": [0.3, 0.0, 0.0], "mean_velocity": [0.3, 0.0, 0.0],
+            "velocity_error": 0.01, "swing_apex": [0.0, 0.0], "step_height": 0.0,
+            "max_torque_ratio": 1.08}
+    assert motion_warnings("walk", walk, WalkSettings()) == [
+        "the plan's torques reach 1.08 times the URDF effort limits: more than the robot's "
+        "motors are rated for",
+        "step_height is 0: the swing feet are not lifted (they rise at most 0.00 cm, sliding "
+        "or skimming the ground)"]
+
+
+@pytest.mark.slow
+def test_cli_turn_solves_and_exits_zero(tmp_path, capsys):
+    """Every CLI turn ended in a TypeError (exit code 1) after printing 'solved' and writing
+    its outputs (session 30's walk warnings; an auditor's). go2, one cycle, -45 degrees:
+    ~40 s."""
+    from horizon_mpc.motions.cli import main
+
+    code = main(["turn", "--robot", "go2", "--set", "yaw=-45", "--set", "cycles=1",
+                 "--set", "step_height=0.04", "--no-animation", "--out", str(tmp_path)])
+    out = capsys.readouterr()
+    assert code == 0, out.out + out.err
+    assert "turn: solved in" in out.out and "WARNING" not in out.out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["results"]["final_yaw_deg"] == pytest.approx(-45.0, abs=1.0)
+
+
+def test_a_turn_beyond_180_degrees_per_gait_cycle_is_refused():
+    """yaw 1e9 ran a 276 s solve to 'NOT solved' (an auditor's); 360 in two cycles solves."""
+    assert TurnSettings(yaw=-360.0, cycles=2).yaw == -360.0
+    with pytest.raises(ValueError, match=r"setting 'yaw' must be within \+-180 degrees per "
+                       r"gait cycle \(cycles 1: \+-180\), got 1e\+09; more cycles"):
+        TurnSettings(yaw=1e9, cycles=1)
+    with pytest.raises(ValueError, match="'yaw'"):
+        TurnSettings(yaw=float("nan"))
 
 
 def test_verbose_prints_the_solvers_iterations_as_they_go(tmp_path, capsys):

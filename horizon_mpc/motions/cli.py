@@ -315,12 +315,7 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
     for key, value in res.summary.items():
         if not isinstance(value, list) or len(value) <= 4:
             print(f"  {key}: {value}")
-    ratio = res.summary.get("max_torque_ratio")
-    if isinstance(ratio, float) and ratio > 1.0 + TORQUE_RATIO_TOLERANCE:
-        print(f"  WARNING: the plan's torques reach {ratio:.3g} times the URDF effort limits "
-              f"(torque_limit_scale {getattr(settings, 'torque_limit_scale', None)}): more than "
-              "the robot's motors are rated for")
-    for warning in walk_warnings(res.summary):
+    for warning in motion_warnings(args.motion, res.summary, settings):
         print(f"  WARNING: {warning}")
     if "pybullet_replay" in extra:
         print(f"  pybullet_replay: {extra['pybullet_replay']}")
@@ -349,10 +344,25 @@ VELOCITY_ERROR_WARNING = 0.2
 SWING_APEX_WARNING = 0.2
 
 
+def motion_warnings(motion: str, summary: dict, settings: object) -> list[str]:
+    """What to say beside "solved" of a motion's ``summary``: torques beyond the URDF's effort
+    limits (naming ``torque_limit_scale`` where the motion has one), and for a walk
+    :func:`walk_warnings` (until session 31 asked of every motion: each CLI turn, whose
+    summary has per-foot swing apexes, ended in a TypeError after its outputs were written)."""
+    out = []
+    ratio = summary.get("max_torque_ratio")
+    if isinstance(ratio, float) and ratio > 1.0 + TORQUE_RATIO_TOLERANCE:
+        scale = getattr(settings, "torque_limit_scale", None)
+        out.append(f"the plan's torques reach {ratio:.3g} times the URDF effort limits"
+                   + (f" (torque_limit_scale {scale:g})" if scale is not None else "")
+                   + ": more than the robot's motors are rated for")
+    return out + (walk_warnings(summary) if motion == "walk" else [])
+
+
 def walk_warnings(summary: dict) -> list[str]:
-    """What to say of a walk (nothing for the other motions) whose success is the
-    problem's (converged, physically consistent) but not what was asked: a mean velocity
-    more than :data:`VELOCITY_ERROR_WARNING` off its reference, swing feet that rise less
+    """What to say of a walk (its summary only) whose success is the problem's (converged,
+    physically consistent) but not what was asked: a mean velocity more than
+    :data:`VELOCITY_ERROR_WARNING` off its reference, swing feet that rise less
     than :data:`SWING_APEX_WARNING` of the gait's step height (they skim the ground), or a
     gait that swings feet with a step height of 0."""
     out = []

@@ -42,6 +42,11 @@ __all__ = ["TurnProblem", "TurnSettings", "build_turn", "run_turn", "turn_schedu
 log = logging.getLogger(__name__)
 
 
+#: degrees a gait cycle (four steps) may turn: 45 per step (a 360-degree turn in the default
+#: two cycles solves; 1e9 degrees ran a 276 s solve to 'NOT solved')
+MAX_YAW_PER_CYCLE = 180.0
+
+
 @dataclass
 class TurnSettings:
     """Timeline (s), target and weights of the turn (``config/motions/turn.yaml``)."""
@@ -73,6 +78,11 @@ class TurnSettings:
                        non_negative=("stand", "pause", "settle", "foot_radius", "w_position",
                                      "w_height", "w_upright", "w_yaw", "w_posture",
                                      "w_velocity", "w_acceleration", "w_force"))
+        if not abs(self.yaw) <= MAX_YAW_PER_CYCLE * self.cycles:
+            raise ValueError(f"setting 'yaw' must be within +-{MAX_YAW_PER_CYCLE:g} degrees per "
+                             f"gait cycle (cycles {self.cycles}: +-"
+                             f"{MAX_YAW_PER_CYCLE * self.cycles:g}), got {self.yaw:g}; more "
+                             "cycles turn further")
 
     @property
     def duration(self) -> float:
