@@ -1089,6 +1089,45 @@ def test_startup_errors_end_in_one_line_and_exit_code_1_interrupts_in_0(monkeypa
     assert spin_until_signal(lambda: None, ["mpc_node", "--ros-args", "-p"]) == 2
 
 
+_HUNG_TEARDOWN = """
+import re, sys, time
+from rclpy.node import Node
+from horizon_mpc.nodes import spin
+spin.TEARDOWN_TIMEOUT, spin.TEARDOWN_BACKSTOP = 0.5, 0.5
+class Hung(Node):
+    def __init__(self):
+        super().__init__("hung")
+        print("READY", flush=True)
+    def destroy_node(self):
+        if sys.argv[1] == "sleep":
+            time.sleep(60)  # waits with the GIL released
+        else:  # a C call that keeps the GIL (exponential backtracking)
+            re.match(r"(a+)+$", "a" * 40 + "b")
+sys.exit(spin.spin_until_signal(Hung, ["hung"], process_exits=True))
+"""
+
+
+@pytest.mark.parametrize("how, code, said", [
+    ("sleep", 0, "the ROS/DDS teardown did not finish within 0.5 s"),
+    ("gil", 1, "Timeout (0:00:01)!")])
+def test_a_teardown_that_hangs_does_not_keep_the_process(how, code, said):
+    """An auditor's mpc_node hung in Fast DDS's participant teardown after SIGINT (1 stop
+    in ~14), 86 s and counting, SIGTERM ignored: an executable now ends itself
+    TEARDOWN_TIMEOUT after its teardown began (exit code 0), and faulthandler ends it
+    (stacks on stderr, exit code 1) when even that cannot run."""
+    proc = subprocess.Popen([sys.executable, "-c", _HUNG_TEARDOWN, how],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "READY"
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == code, err
+    assert said in err
+
+
 def test_an_integer_for_a_float_parameter_is_taken_at_startup(context, walking_mpc):
     """'-p control_rate:=50' (rcl types it an integer) is 50.0, not a type error."""
     node = sim_time_node(context, walking_mpc, control_rate=25, state_timeout=1,

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import faulthandler
 import itertools
 import logging
+import os
 import re
 import signal
 import sys
@@ -126,12 +129,49 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
         pass
     finally:
         starting = False
-        executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        with _teardown_watchdog(process_exits):
+            executor.shutdown()
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
         _release(previous, process_exits)
     return 0
+
+
+#: wall s the DDS teardown may take before an executable's process ends without it
+TEARDOWN_TIMEOUT = 5.0
+#: s more before faulthandler ends it (stacks on stderr, exit code 1) when even that cannot
+#: run (a C call that keeps the GIL)
+TEARDOWN_BACKSTOP = 5.0
+
+
+@contextlib.contextmanager
+def _teardown_watchdog(process_exits: bool, timeout: float | None = None):
+    """End the process (exit code 0, one line on stderr) when the teardown inside takes
+    longer than ``timeout`` (default :data:`TEARDOWN_TIMEOUT`); only for an executable
+    (``process_exits``). An auditor's mpc_node hung in Fast DDS's participant teardown
+    (a lock taken by its discovery thread as the simulator left at the same moment; 1 stop
+    in ~14) and never exited, not even on SIGTERM."""
+    if not process_exits:
+        yield
+        return
+    timeout = TEARDOWN_TIMEOUT if timeout is None else timeout
+
+    def give_up() -> None:
+        sys.stderr.write(f"[horizon_mpc] shutdown: the ROS/DDS teardown did not finish "
+                         f"within {timeout:g} s (a middleware deadlock); exiting without it\n")
+        sys.stderr.flush()
+        os._exit(0)
+
+    timer = threading.Timer(timeout, give_up)
+    timer.daemon = True
+    timer.start()
+    faulthandler.dump_traceback_later(timeout + TEARDOWN_BACKSTOP, exit=True)
+    try:
+        yield
+    finally:
+        timer.cancel()
+        faulthandler.cancel_dump_traceback_later()
 
 
 #: default names of this package's nodes (mpc_node, sim_node)
