@@ -25,7 +25,7 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Twist
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 from nav_msgs.msg import Odometry, Path
 from rclpy.executors import SingleThreadedExecutor
@@ -171,6 +171,8 @@ near_limits = st.one_of(floats, st.sampled_from([-1.5, 1.5, -1.5000001, 1.500000
 
 @given(pos=st.lists(near_limits, min_size=3, max_size=3),
        vel=st.lists(near_limits, min_size=3, max_size=3))
+@example(pos=[0.0, 0.0, math.inf], vel=[0.0] * 3)  # a reviewer's: an unlimited joint at inf
+@example(pos=[0.0, 0.0, -math.inf], vel=[0.0] * 3)  # was accepted by the fast path
 def test_joint_readings_are_accepted_exactly_by_the_documented_rule(pos, vel):
     """The checks run first on the whole arrays (a fast path, session 31) and name the
     problem only when those fail: accepted iff every position is finite and within
@@ -1098,34 +1100,48 @@ class Hung(Node):
     def __init__(self):
         super().__init__("hung")
         print("READY", flush=True)
+        if sys.argv[1] == "startup":
+            raise ValueError("unknown robot 'go3'")
     def destroy_node(self):
-        if sys.argv[1] == "sleep":
-            time.sleep(60)  # waits with the GIL released
-        else:  # a C call that keeps the GIL (exponential backtracking)
+        if sys.argv[1] == "gil":  # a C call that keeps the GIL (exponential backtracking)
             re.match(r"(a+)+$", "a" * 40 + "b")
+        else:
+            time.sleep(60)  # waits with the GIL released
+if sys.argv[1] == "startup":  # the start-up error's teardown hangs
+    import rclpy
+    rclpy.try_shutdown = lambda *a, **k: time.sleep(60)
 sys.exit(spin.spin_until_signal(Hung, ["hung"], process_exits=True))
 """
 
 
 @pytest.mark.parametrize("how, code, said", [
     ("sleep", 0, "the ROS/DDS teardown did not finish within 0.5 s"),
-    ("gil", 1, "Timeout (0:00:01)!")])
+    ("gil", 1, "Timeout (0:00:01)!"),
+    # a start-up error keeps its exit code (it exited 0: a reviewer)
+    ("startup", 1, "the ROS/DDS teardown did not finish within 0.5 s"),
+    # no stderr: no faulthandler (it raised in the teardown, exit code 1: a reviewer)
+    ("no_stderr", 0, None)])
 def test_a_teardown_that_hangs_does_not_keep_the_process(how, code, said):
     """An auditor's mpc_node hung in Fast DDS's participant teardown after SIGINT (1 stop
     in ~14), 86 s and counting, SIGTERM ignored: an executable now ends itself
     TEARDOWN_TIMEOUT after its teardown began (exit code 0), and faulthandler ends it
     (stacks on stderr, exit code 1) when even that cannot run."""
-    proc = subprocess.Popen([sys.executable, "-c", _HUNG_TEARDOWN, how],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # no_stderr: closed, as with 2>&- (the child's sys.stderr is None)
+    argv = (["sh", "-c", f'exec "{sys.executable}" -c "$0" {how} 2>&-', _HUNG_TEARDOWN]
+            if how == "no_stderr" else [sys.executable, "-c", _HUNG_TEARDOWN, how])
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True,
+                            stderr=None if how == "no_stderr" else subprocess.PIPE)
     try:
         assert proc.stdout.readline().strip() == "READY"
-        time.sleep(0.3)
-        proc.send_signal(signal.SIGINT)
+        if how != "startup":
+            time.sleep(0.3)
+            proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
     assert proc.returncode == code, err
-    assert said in err
+    if said is not None:
+        assert said in err
 
 
 def test_an_integer_for_a_float_parameter_is_taken_at_startup(context, walking_mpc):

@@ -173,11 +173,10 @@ def joints_from_joint_state(
     # the checks of a good reading first, in few numpy calls (a node reads every state a
     # driver sends, 500 Hz from the simulator); the details only when one fails
     qj = pos[idx]
-    if limits is None:
-        good = np.isfinite(qj).all()
-    else:
-        good = ((qj >= limits[0] - JOINT_LIMIT_MARGIN)
-                & (qj <= limits[1] + JOINT_LIMIT_MARGIN)).all()  # NaN fails too
+    good = np.isfinite(qj)
+    if limits is not None:  # (an infinite limit, a wheel's, lets inf through: hence both)
+        good &= (qj >= limits[0] - JOINT_LIMIT_MARGIN) & (qj <= limits[1] + JOINT_LIMIT_MARGIN)
+    good = good.all()
     if not good:
         _refuse_positions(qj, joint_names, limits)
     if not vel.size:

@@ -67,6 +67,7 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
         return 0
     stop = threading.Event()
     starting = True
+    exit_code = [0]  # what a hung teardown exits with (the watchdog's)
 
     def on_signal(*_: object) -> None:
         stop.set()
@@ -108,6 +109,7 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
             else:
                 log.fatal(f"cannot start: {type(exc).__name__}: {message}\n"
                           + traceback.format_exc())
+            exit_code[0] = 1
             return 1
         if stop.is_set():  # a signal while the node was being built
             return 0
@@ -129,7 +131,7 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
         pass
     finally:
         starting = False
-        with _teardown_watchdog(process_exits):
+        with _teardown_watchdog(process_exits, exit_code):
             executor.shutdown()
             if node is not None:
                 node.destroy_node()
@@ -146,32 +148,41 @@ TEARDOWN_BACKSTOP = 5.0
 
 
 @contextlib.contextmanager
-def _teardown_watchdog(process_exits: bool, timeout: float | None = None):
-    """End the process (exit code 0, one line on stderr) when the teardown inside takes
-    longer than ``timeout`` (default :data:`TEARDOWN_TIMEOUT`); only for an executable
-    (``process_exits``). An auditor's mpc_node hung in Fast DDS's participant teardown
-    (a lock taken by its discovery thread as the simulator left at the same moment; 1 stop
-    in ~14) and never exited, not even on SIGTERM."""
+def _teardown_watchdog(process_exits: bool, exit_code: list[int], timeout: float | None = None):
+    """End the process (one line on stderr, exit code ``exit_code[0]``: 0 after a signal,
+    1 after a start-up error) when the teardown inside takes longer than ``timeout``
+    (default :data:`TEARDOWN_TIMEOUT`); only for an executable (``process_exits``). An
+    auditor's mpc_node hung in Fast DDS's participant teardown (a lock taken by its
+    discovery thread as the simulator left at the same moment; 1 stop in ~14) and never
+    exited, not even on SIGTERM. Without a usable stderr (``2>&-``) there is no faulthandler
+    backstop; the teardown runs all the same."""
     if not process_exits:
         yield
         return
     timeout = TEARDOWN_TIMEOUT if timeout is None else timeout
 
     def give_up() -> None:
-        sys.stderr.write(f"[horizon_mpc] shutdown: the ROS/DDS teardown did not finish "
-                         f"within {timeout:g} s (a middleware deadlock); exiting without it\n")
-        sys.stderr.flush()
-        os._exit(0)
+        with contextlib.suppress(Exception):  # (no stderr: exit all the same)
+            sys.stderr.write(f"[horizon_mpc] shutdown: the ROS/DDS teardown did not finish "
+                             f"within {timeout:g} s (a middleware deadlock); exiting without "
+                             "it\n")
+            sys.stderr.flush()
+        os._exit(exit_code[0])
 
     timer = threading.Timer(timeout, give_up)
     timer.daemon = True
     timer.start()
-    faulthandler.dump_traceback_later(timeout + TEARDOWN_BACKSTOP, exit=True)
+    try:  # faulthandler needs a stderr with a file descriptor
+        faulthandler.dump_traceback_later(timeout + TEARDOWN_BACKSTOP, exit=True)
+        backstop = True
+    except (RuntimeError, ValueError, AttributeError, OSError):
+        backstop = False
     try:
         yield
     finally:
         timer.cancel()
-        faulthandler.cancel_dump_traceback_later()
+        if backstop:
+            faulthandler.cancel_dump_traceback_later()
 
 
 #: default names of this package's nodes (mpc_node, sim_node)
