@@ -415,7 +415,8 @@ def test_a_reach_at_an_active_joint_limit_converges():
     """An auditor's UR5 reach (torque inputs, joint limits as bounds, the elbow's active on
     three nodes): the line search's reference was the maximum of the last 3 merit values,
     and full steps of period 3 lowered the merit by 2e-7 per cycle: max_iter at 300 and at
-    1000 iterations. With their weighted mean: 58 iterations, IPOPT's optimum."""
+    1000 iterations. Once the violation stalls under full steps, their weighted mean: 112
+    iterations, IPOPT's optimum (the mean from the start: 58, but it failed elsewhere)."""
     import casadi as cs
 
     from horizon_mpc import Problem
@@ -445,7 +446,7 @@ def test_a_reach_at_an_active_joint_limit_converges():
         return prb, q
 
     ip, gn = solve_both(build)
-    assert gn.stats.iterations <= 100, gn.stats.status
+    assert gn.stats.iterations <= 150, gn.stats.status
     assert gn.stats.cost == pytest.approx(ip.stats.cost, rel=1e-6)
     active = np.isclose(gn.solution["q"], m.q_upper[:, None], atol=1e-6) | np.isclose(
         gn.solution["q"], m.q_lower[:, None], atol=1e-6)

@@ -11,9 +11,10 @@ constraints sorted stage-wise so the KKT matrix is banded), warm-started with th
 multipliers and, if that fails, once more cold. When the linearised constraints
 are inconsistent, an *elastic* QP (l1-penalised slacks on every row, penalty
 ``elastic_penalty``) gives the step instead. The step ``w += alpha d`` is chosen by
-backtracking (Armijo, non-monotone: against the mean of the last ``nonmonotone`` merit
-values, weights halving into the past, which lets the full Gauss-Newton step through where
-a monotone test would halve it forever) on the
+backtracking (Armijo, non-monotone: against the maximum of the last ``nonmonotone`` merit
+values, which lets the full Gauss-Newton step through where a monotone test would halve it
+forever; once the violation stalls, :data:`STALL_WINDOW`, against their mean with weights
+halving into the past, which ends the cycles of full steps the maximum lets through) on the
 l1 merit ``phi(w) = f(w) + mu ||viol(g(w))||_1``; ``mu`` never decreases and stays above
 the largest QP multiplier. Multipliers follow ``lam += alpha (lam_QP - lam)``.
 
@@ -46,8 +47,9 @@ Options (``make_solver('gnsqp', prb, opts)``):
 ``qp_options``      {}         options handed to the QP plugin (merged over ours)
 ``regularization``  1e-8       ``reg`` added to the Gauss-Newton Hessian's diagonal
 ``armijo``          1e-4       sufficient-decrease constant of the line search
-``nonmonotone``     3          merit values whose weighted mean the Armijo test compares
-                               against (1: monotone)
+``nonmonotone``     3          merit values the Armijo test compares against (their
+                               maximum; their weighted mean once the violation stalls;
+                               1: monotone)
 ``min_step``        1e-8       smallest step length tried before giving up
 ``elastic_penalty`` 1e4        l1 penalty of the elastic QP's slacks (at least ``mu``)
 ``sym``             'SX'       graph type of the transcription ('SX' or 'MX')
@@ -78,6 +80,16 @@ log = logging.getLogger(__name__)
 
 # elastic steps in a row that cannot reduce the violation before "locally infeasible"
 INFEASIBLE_STEPS = 5
+
+# The line search compares with the maximum of the last `nonmonotone` merit values until
+# the violation falls less than STALL_FACTOR times over STALL_WINDOW iterations, then with
+# their weighted mean (GnSqpSolver._stalled). Measured on 17 OCPs (doc/problem.md): the
+# mean from the start cycled or stalled where the maximum converged (collocated cart-poles,
+# a unicycle with four discs); the maximum throughout cycled at active bounds (UR5 reaches,
+# an Euler unicycle)
+STALL_WINDOW = 30
+STALL_FACTOR = 0.3
+STALL_FULL_STEPS = 1 / 3  # share of full steps in the window (the cycles' pattern: 1, 1, 1/4)
 
 # qrqp's iteration cap of the plain QP: min(10000, max(QRQP_MIN_ITER, variables + rows))
 QRQP_MIN_ITER = 200
@@ -262,6 +274,9 @@ class GnSqpSolver(NlpSolver):
         lam_x = _signed(self.lam_x[pw], lbx, ubx) if self.lam_x is not None else np.zeros(tr.nw)
         history: list[dict[str, float]] = []
         self._merit_history: list[float] = []
+        self._violation_history: list[float] = []
+        self._full_steps: list[bool] = []  # whether each line search took the full step
+        self._strict_reference = False  # the line search's, once the violation stalled
         self._elastic_steps = 0
         mu, status, alpha, step, success = 0.0, "max_iter reached", 1.0, np.inf, False
         multipliers_only = False  # the last iteration only took the QP's multipliers
@@ -355,30 +370,53 @@ class GnSqpSolver(NlpSolver):
                   elapsed, s.cost, s.constraint_violation)
         return success
 
+    def _stalled(self) -> bool:
+        """Whether the constraint violation (l1, above ``tol_constr``) fell less than
+        :data:`STALL_FACTOR` times over the last :data:`STALL_WINDOW` iterations, a third
+        of them full steps: full steps the maximum of the recent merits lets through then
+        cycle (a UR5 reach at an
+        active joint limit: steps of period 3, the merit 2e-7 lower per cycle, 'max_iter'
+        at 300 and 1000 iterations)."""
+        v, full = self._violation_history, self._full_steps
+        if len(v) < 2 * STALL_WINDOW:
+            return False
+        before, now = min(v[-2 * STALL_WINDOW:-STALL_WINDOW]), min(v[-STALL_WINDOW:])
+        # ... through full steps: a stall under short steps (a collocated cart-pole at an
+        # active bound, alpha 1/16-1/32 for 200 iterations) is the maximum's to end (it
+        # did, in 286 iterations; the mean took 397)
+        return (now > self.opts["tol_constr"] and now > STALL_FACTOR * before
+                and sum(full[-STALL_WINDOW:]) >= STALL_FULL_STEPS * STALL_WINDOW)
+
     def _line_search(self, w, d, p, f, g, grad, mu, slack, lbg, ubg) -> float | None:
         """Backtracking (non-monotone Armijo) on the l1 merit; the step length or None."""
-        phi0 = f + mu * _l1_violation(g, lbg, ubg)
+        violation = _l1_violation(g, lbg, ubg)
+        phi0 = f + mu * violation
         self._merit_history.append(phi0)
-        ref = max(phi0, _recent_mean(self._merit_history, self.opts["nonmonotone"]))
+        self._violation_history.append(violation)
+        recent = self._merit_history[-self.opts["nonmonotone"]:]
+        if not self._strict_reference and self._stalled():
+            self._strict_reference = True
+            log.debug("gnsqp: the violation stalled; the line search's reference is now the "
+                      "weighted mean of the recent merit values")
+        ref = max(phi0, _recent_mean(recent)) if self._strict_reference else max(recent)
         slack_tol = 1e-12 * max(1.0, abs(ref))  # rounding of the merit near convergence
         # directional derivative of the merit along d (the linearisation leaves `slack`)
-        slope = min(0.0, float(grad @ d) + mu * (slack - _l1_violation(g, lbg, ubg)))
+        slope = min(0.0, float(grad @ d) + mu * (slack - violation))
         alpha = 1.0
         while alpha >= self.opts["min_step"]:
             f1, g1 = self._evaluate(w + alpha * d, p)
             phi1 = float(f1) + mu * _l1_violation(g1.full().ravel(), lbg, ubg)
             if phi1 <= ref + self.opts["armijo"] * alpha * slope + slack_tol:
+                self._full_steps.append(alpha == 1.0)
                 return alpha
             alpha *= 0.5
+        self._full_steps.append(False)
         return None
 
 
-def _recent_mean(values: list[float], n: int) -> float:
-    """The mean of the last ``n`` of ``values``, weights halving into the past (the newest
-    1, the one before 1/2, ...): the non-monotone line search's reference. Their maximum let
-    a GN-SQP cycle (a UR5 reach at an active joint limit: full steps of period 3, each
-    cycle's merit 2e-7 lower, 'max_iter' after 1000 iterations; now 58)."""
-    recent = values[-n:]
+def _recent_mean(recent: list[float]) -> float:
+    """The mean of ``recent`` (oldest first), weights halving into the past (the newest 1,
+    the one before 1/2, ...): the line search's reference once the violation stalled."""
     weights = [0.5 ** k for k in range(len(recent) - 1, -1, -1)]
     return sum(w * v for w, v in zip(weights, recent, strict=True)) / sum(weights)
 
