@@ -253,6 +253,9 @@ class SimNode(Node):
 
         # lockstep bookkeeping: the stamp (ns) of the state awaiting an answer
         self.awaiting_stamp_ns: int | None = None
+        # trajectories that came stamped otherwise while a state awaited its answer: their
+        # count and the last one's stamp minus the awaited one (ns)
+        self._off_stamp_answers = (0, 0)
         self._started = not self.lockstep
         self._deadline = self._wall_deadline(START_WAIT)
         self._controller_seen: float | None = None  # wall time, see peers_ready
