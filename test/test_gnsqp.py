@@ -451,3 +451,14 @@ def test_a_reach_at_an_active_joint_limit_converges():
     active = np.isclose(gn.solution["q"], m.q_upper[:, None], atol=1e-6) | np.isclose(
         gn.solution["q"], m.q_lower[:, None], atol=1e-6)
     assert active[:, 1:].any()  # the case: a joint limit active at the optimum
+
+
+def test_the_weighted_mean_is_the_reference_only_once_the_violation_stalls():
+    """Its mean as the reference from the first iteration crept where the maximum takes
+    full steps: a collocated cart-pole at an active cart limit needed 292 iterations (a
+    reviewer's); the maximum until a stall: 120."""
+    prb, _ = build_cartpole(50, transcription="direct_collocation", degree=2, cart_limit=0.6)
+    solver = make_solver("gnsqp", prb, {"max_iter": 400})
+    assert solver.solve(), solver.stats.status
+    assert solver.stats.iterations <= 150
+    assert not solver._strict_reference

@@ -1102,6 +1102,10 @@ class Hung(Node):
         print("READY", flush=True)
         if sys.argv[1] == "startup":
             raise ValueError("unknown robot 'go3'")
+        if sys.argv[1] == "bug":
+            self.create_timer(0.1, self.bug)
+    def bug(self):
+        raise RuntimeError("a bug in a callback")
     def destroy_node(self):
         if sys.argv[1] == "gil":  # a C call that keeps the GIL (exponential backtracking)
             re.match(r"(a+)+$", "a" * 40 + "b")
@@ -1120,7 +1124,9 @@ sys.exit(spin.spin_until_signal(Hung, ["hung"], process_exits=True))
     # a start-up error keeps its exit code (it exited 0: a reviewer)
     ("startup", 1, "the ROS/DDS teardown did not finish within 0.5 s"),
     # no stderr: no faulthandler (it raised in the teardown, exit code 1: a reviewer)
-    ("no_stderr", 0, None)])
+    ("no_stderr", 0, None),
+    # an error in the spin keeps its exit code and traceback (0 and lost: a reviewer)
+    ("bug", 1, "RuntimeError: a bug in a callback")])
 def test_a_teardown_that_hangs_does_not_keep_the_process(how, code, said):
     """An auditor's mpc_node hung in Fast DDS's participant teardown after SIGINT (1 stop
     in ~14), 86 s and counting, SIGTERM ignored: an executable now ends itself
@@ -1133,7 +1139,7 @@ def test_a_teardown_that_hangs_does_not_keep_the_process(how, code, said):
                             stderr=None if how == "no_stderr" else subprocess.PIPE)
     try:
         assert proc.stdout.readline().strip() == "READY"
-        if how != "startup":
+        if how not in ("startup", "bug"):
             time.sleep(0.3)
             proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
@@ -1142,6 +1148,8 @@ def test_a_teardown_that_hangs_does_not_keep_the_process(how, code, said):
     assert proc.returncode == code, err
     if said is not None:
         assert said in err
+    if how == "bug":
+        assert "the ROS/DDS teardown did not finish" in err
 
 
 def test_an_integer_for_a_float_parameter_is_taken_at_startup(context, walking_mpc):

@@ -68,6 +68,7 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
     stop = threading.Event()
     starting = True
     exit_code = [0]  # what a hung teardown exits with (the watchdog's)
+    failure: list[str] = []  # the traceback of an error in the spin, said by the watchdog
 
     def on_signal(*_: object) -> None:
         stop.set()
@@ -129,9 +130,13 @@ def spin_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None 
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException, _StartupInterrupted):
         pass
+    except Exception:  # a bug: its exit code and traceback, even if the teardown hangs
+        exit_code[0] = 1
+        failure.append(traceback.format_exc())
+        raise
     finally:
         starting = False
-        with _teardown_watchdog(process_exits, exit_code):
+        with _teardown_watchdog(process_exits, exit_code, failure):
             executor.shutdown()
             if node is not None:
                 node.destroy_node()
@@ -148,9 +153,11 @@ TEARDOWN_BACKSTOP = 5.0
 
 
 @contextlib.contextmanager
-def _teardown_watchdog(process_exits: bool, exit_code: list[int], timeout: float | None = None):
+def _teardown_watchdog(process_exits: bool, exit_code: list[int], failure: list[str],
+                       timeout: float | None = None):
     """End the process (one line on stderr, exit code ``exit_code[0]``: 0 after a signal,
-    1 after a start-up error) when the teardown inside takes longer than ``timeout``
+    1 after a start-up error or an error in the spin, whose traceback, ``failure``, is
+    written first) when the teardown inside takes longer than ``timeout``
     (default :data:`TEARDOWN_TIMEOUT`); only for an executable (``process_exits``). An
     auditor's mpc_node hung in Fast DDS's participant teardown (a lock taken by its
     discovery thread as the simulator left at the same moment; 1 stop in ~14) and never
@@ -163,6 +170,7 @@ def _teardown_watchdog(process_exits: bool, exit_code: list[int], timeout: float
 
     def give_up() -> None:
         with contextlib.suppress(Exception):  # (no stderr: exit all the same)
+            sys.stderr.write("".join(failure))
             sys.stderr.write(f"[horizon_mpc] shutdown: the ROS/DDS teardown did not finish "
                              f"within {timeout:g} s (a middleware deadlock); exiting without "
                              "it\n")

@@ -371,10 +371,11 @@ class GnSqpSolver(NlpSolver):
         return success
 
     def _stalled(self) -> bool:
-        """Whether the constraint violation (l1, above ``tol_constr``) fell less than
-        :data:`STALL_FACTOR` times over the last :data:`STALL_WINDOW` iterations, a third
-        of them full steps: full steps the maximum of the recent merits lets through then
-        cycle (a UR5 reach at an
+        """Whether the violation (l1) stalled under full steps: the smallest of the last
+        :data:`STALL_WINDOW` iterations' above ``tol_constr`` and above :data:`STALL_FACTOR`
+        times the smallest of the window before (so no answer before 2 windows of this
+        solve), and :data:`STALL_FULL_STEPS` of the last window's steps full. Full steps the
+        maximum of the recent merits lets through then cycle (a UR5 reach at an
         active joint limit: steps of period 3, the merit 2e-7 lower per cycle, 'max_iter'
         at 300 and 1000 iterations)."""
         v, full = self._violation_history, self._full_steps
