@@ -696,7 +696,9 @@ def test_no_mpc_process_outlives_a_stopped_or_killed_closed_loop(tmp_path, sig):
         deadline = time.monotonic() + 30
         while process_exists(child) and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert not process_exists(child) or _zombie(child), f"mpc_node {child} outlived its parent"
+        assert not process_exists(child) or _zombie(child), (
+            f"mpc_node {child} outlived its parent; its output ends with:\n"
+            + _stacks_of(child))
     finally:
         for pid in (parent.pid, child):
             if process_exists(pid):
@@ -715,6 +717,20 @@ def _wait_or_dump(proc: subprocess.Popen, timeout: float, stderr: Path) -> None:
             proc.wait(timeout=10)
         pytest.fail(f"the closed loop did not exit within {timeout:g} s; its stderr ends "
                     f"with:\n{stderr.read_text(errors='replace')[-6000:]}")
+
+
+def _stacks_of(pid: int) -> str:
+    """The end of a surviving MPC process's output (the dead parent's anonymous temporary
+    file, still open in the child as its stdout) after SIGABRT made its fault handler write
+    every thread's stack there: what it was stuck in (seen once, in a loaded CI run)."""
+    try:
+        with open(f"/proc/{pid}/fd/1", "rb") as out:  # opened before the process ends
+            os.kill(pid, signal.SIGABRT)
+            time.sleep(2.0)
+            out.seek(0)
+            return out.read().decode(errors="replace")[-6000:]
+    except OSError as exc:
+        return f"(unreadable: {exc})"
 
 
 def _zombie(pid: int) -> bool:
