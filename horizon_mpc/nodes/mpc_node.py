@@ -32,6 +32,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from horizon_mpc.closed_loop_report import FALL_HEIGHT, FALL_TILT
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.model import RobotModel
@@ -83,11 +84,9 @@ INFEASIBLE_PLAN = 0.3
 #: s of node clock the violation must stay beyond INFEASIBLE_PLAN before it is WARN: a
 #: falling robot's plans stay there; at 100 Hz single ticks of a walking go2 reached 81-140
 INFEASIBLE_FOR = 0.1
-#: a measured base this low (fraction of its nominal height above the ground) or this tilted
-#: (rad) is a fallen robot (ERROR diagnostics; the closed loop's fall test): the status
-#: said OK while go2 lay on its side in some falls, the violation of its plans being small
-FALLEN_HEIGHT = 0.6
-FALLEN_TILT = 0.5
+# a measured base below FALL_HEIGHT of its nominal height above the ground, or tilted more
+# than FALL_TILT (rad), is a fallen robot: ERROR diagnostics, the closed loop's thresholds
+# (the status said OK while go2 lay on its side in some falls, its plans' violation small)
 MISS_WARN_SHARE = 0.2  # prepare misses among the recent ticks beyond which the node warns
 _RECENT_STATES = 8  # joint_states / odom messages kept to pair them by stamp
 STATE_QUEUE_DEPTH = 1  # of the joint_states and odom subscriptions
@@ -855,8 +854,8 @@ class MpcNode(MpcParameters, Node):
 
     def _fallen(self, base: np.ndarray) -> str:
         """Why the measured base pose ``base`` (x, y, z, quaternion x, y, z, w) is a fallen
-        robot's (below FALLEN_HEIGHT of its nominal height above the
-        ground, or tilted more than FALLEN_TILT), or '' if it is not."""
+        robot's (below FALL_HEIGHT of its nominal height above the
+        ground, or tilted more than FALL_TILT), or '' if it is not."""
         _, _, z, qx, qy = base[:5].tolist()
         # the controller's ground is the feet frames' height: a sphere foot's sits its radius
         # above the ground (go2's nominal was 0.312 m here, 0.336 in the closed loop's test)
@@ -864,7 +863,7 @@ class MpcNode(MpcParameters, Node):
         height = z - (self.mpc.ground_height - radius)
         nominal = self.mpc.base_height_above_ground + radius
         cos_tilt = 1.0 - 2.0 * (qx * qx + qy * qy)
-        if cos_tilt < math.cos(FALLEN_TILT) or height < FALLEN_HEIGHT * nominal:
+        if cos_tilt < math.cos(FALL_TILT) or height < FALL_HEIGHT * nominal:
             tilt = math.acos(max(-1.0, min(1.0, cos_tilt)))
             return (f"the robot seems to have fallen: base {height:.3f} m above the ground "
                     f"(nominal {nominal:.3f} m), tilted {tilt:.2f} rad")
