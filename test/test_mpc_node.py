@@ -1255,6 +1255,40 @@ def _feed_state(node: MpcNode, ns: int, q: np.ndarray) -> None:
     node._on_odom(odometry_to_msg(stamp, q[:3], q[3:7], zeros, zeros))
 
 
+@pytest.mark.parametrize("trigger", ["state", "timer"])
+def test_a_lockstep_tick_longer_than_the_period_is_an_overrun_not_a_deadline_miss(
+        context, walking_mpc, trigger):
+    """With trigger 'state' the lockstep simulator waits for each answer: a tick longer than
+    the period only slows the loop below real time. Until session 32 such ticks were
+    counted (and warned about) as deadline misses; with the timer they still are."""
+    node = sim_time_node(context, walking_mpc, trigger=trigger, diagnostics_rate=0.0)
+    said: list[tuple[str, str]] = []
+    node._warn = lambda kind, text: said.append((kind, text))
+    try:
+        sent = Sent()
+        node._pub_traj, node._pub_path, node._pub_diag = Sent(), Sent(), sent
+        node.period = 1e-9  # every tick's work is longer than this
+        _, q = standing_configuration(node.mpc.cfg)
+        for k in range(4):
+            _feed_state(node, 10 * NS_PER_S + k * 20_000_000, q)
+            if trigger == "timer":
+                node.tick()
+        assert node.ticks == 4  # the bootstrap and three ticks, none late by itself
+        late = (node.overruns, node.deadline_misses)
+        assert late == ((3, 0) if trigger == "state" else (0, 3))
+        kinds = {kind for kind, _ in said}
+        if trigger == "state":
+            assert "deadline" not in kinds
+            text = next(t for k, t in said if k == "overrun")
+            assert "slower than real time" in text and "misses no deadline" in text
+        else:
+            assert "overrun" not in kinds and "deadline" in kinds
+        values = {kv.key: kv.value for kv in sent.msgs[-1].status[0].values}
+        assert (int(values["overruns"]), int(values["deadline_misses"])) == late
+    finally:
+        node.destroy_node()
+
+
 def test_a_timer_tick_plans_from_the_state_of_the_prepared_time_when_it_came(context,
                                                                               walking_mpc):
     """A timer tick sees the state of its own time and sometimes a newer one (a 250 Hz
