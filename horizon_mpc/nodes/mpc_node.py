@@ -894,6 +894,12 @@ def _unset_hint(joints_ns: int, base_ns: int, age: float = 0.0) -> str:
     node's clock is far past them (sim time starts at 0), or of states on another clock
     (``age`` s old: a simulator's sim time read on wall time); empty otherwise."""
     unset = [name for name, ns in (("joint_states", joints_ns), ("odom", base_ns)) if ns == 0]
+    if unset and age > OTHER_CLOCK_AGE:
+        # on wall time, a simulator's legitimate first state (sim time 0) looks the same
+        return (f" ({' and '.join(unset)} stamped 0: header.stamp unset, or a simulator's "
+                "first state read on another clock? a driver must stamp each message with "
+                "the time of its measurement; against a simulator publishing /clock, set "
+                "use_sim_time)")
     if unset:
         return (f" ({' and '.join(unset)} stamped 0: header.stamp unset? the driver must "
                 "stamp each message with the time of its measurement)")
