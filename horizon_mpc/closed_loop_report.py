@@ -170,7 +170,7 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
         "foreign_publishers": list(rec.foreign_publishers),
         "interrupted": bool(getattr(rec, "interrupted", False)),
         "gif_frames": len(rec.frames),
-        "gif_frame_period": rec.frame_period,
+        "gif_frame_period": rec.frame_period if rec.frames else None,  # no GIF: none
     }
 
 

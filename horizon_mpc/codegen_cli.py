@@ -30,7 +30,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.max_mb is not None and args.command != "prune":
         parser.error(f"--max-mb is the bound of `prune`; `{args.command}` takes none")
     if args.dir is not None and not os.path.isdir(args.dir):
-        parser.error(f"--dir {args.dir}: no such folder")
+        parser.error(f"--dir {args.dir}: "
+                     + ("not a folder" if os.path.exists(args.dir) else "no such folder"))
     default = codegen.default_cache_dir()
     if args.dir is None and default.exists() and not default.is_dir():
         parser.error(f"the cache {default} (HORIZON_MPC_CACHE_DIR, XDG_CACHE_HOME or ~/.cache) "

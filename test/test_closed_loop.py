@@ -350,6 +350,8 @@ def test_a_lateral_push_during_the_trot_does_not_make_it_fall(push_time):
     summary = summarise(rec, segs, robot="go2")
     assert summary["falls"]["count"] == 0, summary["falls"]
     assert rec.t[-1] >= 6.95
+    # no GIF, no frame period (it gave 0.05 s for the GIF not made until session 32)
+    assert summary["gif_frames"] == 0 and summary["gif_frame_period"] is None
     # it was pushed (lateral speed during the push) and walks on afterwards
     v = np.asarray(rec.v)
     assert np.max(np.abs(v[_window(rec, push_time, push_time + 0.5), 1])) > 0.1

@@ -441,7 +441,9 @@ def test_cache_command_line_reports_prunes_and_clears(cache):
     # options that did nothing, accepted without a word
     for args, text in ((["clear", "--max-mb", "5"], "--max-mb is the bound of `prune`"),
                        (["info", "--max-mb", "5"], "--max-mb is the bound of `prune`"),
-                       (["info", "--dir", str(cache / "missing")], "no such folder")):
+                       (["info", "--dir", str(cache / "missing")], "no such folder"),
+                       # a file is not a folder (it said 'no such folder': session 32)
+                       (["info", "--dir", str(__file__)], "not a folder")):
         bad = subprocess.run([*cmd, *args], env=env, capture_output=True, text=True,
                              timeout=120)
         assert bad.returncode == 2 and text in bad.stderr, args
