@@ -121,7 +121,8 @@ _ARCH_MEMO: dict[tuple[str, str], tuple[str, ...]] = {}
 
 @dataclass
 class CompileStats:
-    """Process-wide counters (tests use them to tell a cache hit from a compilation)."""
+    """Process-wide counters (tests use them to tell a compilation, a load from the disk
+    cache and a library already loaded in this process apart)."""
 
     compiled: int = 0  # gcc runs
     loaded: int = 0  # libraries loaded from the disk cache

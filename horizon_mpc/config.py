@@ -2,8 +2,9 @@
 
 Everything robot-specific (foot frames, nominal posture, friction, simulator gains, gait
 timings, cost weights) lives in these YAML files, never in code. A config file is looked up
-by robot name in, in order: the ``config`` folder of the source tree, the package's installed
-share folder (``<prefix>/share/horizon_mpc/config``). A path to a YAML file is accepted too.
+by robot name in the folders of :func:`config_dirs`, in order: the ``config`` folder of the
+source tree, the ament index's ``share/horizon_mpc/config``, the interpreter prefix's (a pip
+install into a venv). A path to a YAML file is accepted too.
 
 Schema (every section but ``robot``/``feet`` is optional and falls back to the defaults below)::
 

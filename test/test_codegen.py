@@ -87,6 +87,10 @@ def test_library_is_cached_on_disk_and_reused(cache):
     codegen.compile_function(fn)
     assert codegen.STATS.compiled == compiled  # no gcc run
     assert codegen.STATS.loaded == loaded + 1
+    hits = codegen.STATS.memory_hits
+    codegen.compile_function(fn)  # loaded in this process already: neither built nor read
+    assert (codegen.STATS.compiled, codegen.STATS.loaded, codegen.STATS.memory_hits) == \
+        (compiled, loaded + 1, hits + 1)
     assert len(list(cache.glob("small_*.so"))) == 1
     assert not list(cache.glob(".build_*"))  # temporary build folders are removed
 

@@ -57,3 +57,16 @@ def test_every_solver_option_is_in_its_docstring_table():
         doc = (cls.__doc__ or "") + (sys.modules[cls.__module__].__doc__ or "")
         missing = [o for o in cls.DEFAULTS if f"``{o}``" not in doc and f"``{o}*``" not in doc]
         assert not missing, (cls.name, missing)
+
+
+def test_the_docstring_examples_of_the_library_run():
+    """The ``>>>`` examples of the modules' docstrings (problem.py's printed two reprs it
+    did not show until session 32: nothing ran them)."""
+    import doctest
+
+    import casadi as cs
+
+    import horizon_mpc.problem.problem as problem_module
+
+    result = doctest.testmod(problem_module, extraglobs={"cs": cs, "np": np})
+    assert result.attempted >= 8 and result.failed == 0

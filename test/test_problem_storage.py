@@ -73,6 +73,13 @@ def test_shift_moves_every_kind_one_node_back(prb):
     np.testing.assert_array_equal(prb.get_variable("r").values[0], [1, 2, 3, 4, 4])
 
 
+def test_one_variable_shifts_alone_in_its_kinds_array(prb):
+    prb.set_stacked_initial_guess("state", np.tile(np.arange(5.0), (3, 1)))
+    prb.get_variable("y").shift()
+    np.testing.assert_array_equal(prb.stacked("state")[2], [1, 2, 3, 4, 4])
+    np.testing.assert_array_equal(prb.stacked("state")[:2], np.tile(np.arange(5.0), (2, 1)))
+
+
 def test_variables_keep_their_values_when_more_are_created():
     p = Problem(3)
     x = p.create_state_variable("x", 1)

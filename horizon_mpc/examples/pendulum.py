@@ -7,6 +7,8 @@ mass 1 kg at length 1 m, viscous damping 0.1 N m s, gravity 9.81 m/s^2.
 
 from __future__ import annotations
 
+from typing import Any
+
 import casadi as cs
 import numpy as np
 
@@ -17,7 +19,7 @@ __all__ = ["build_pendulum_min_time", "energy_pumping_guess", "pendulum_dynamics
 MASS, LENGTH, DAMPING, GRAVITY = 1.0, 1.0, 0.1, 9.81
 
 
-def pendulum_dynamics(theta, omega, tau):
+def pendulum_dynamics(theta: Any, omega: Any, tau: Any) -> Any:
     """Angular acceleration of the damped point-mass pendulum (SX or float)."""
     sin = cs.sin if isinstance(theta, (cs.SX, cs.MX)) else np.sin
     return (tau - DAMPING * omega - MASS * GRAVITY * LENGTH * sin(theta)) / (MASS * LENGTH**2)

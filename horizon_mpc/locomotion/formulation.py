@@ -26,7 +26,8 @@ __all__ = [
 ]
 
 
-def floating_base_double_integrator(model: RobotModel, q, v, a) -> cs.SX:
+def floating_base_double_integrator(model: RobotModel, q: cs.SX, v: cs.SX, a: cs.SX
+                                     ) -> cs.SX:
     """Double-integrator dynamics on the configuration manifold: ``q' = v``, ``v' = a``.
 
     Declares ``q``'s manifold (Lie-group integrate/difference of the model) so that every
@@ -39,7 +40,7 @@ def floating_base_double_integrator(model: RobotModel, q, v, a) -> cs.SX:
     return cs.vertcat(v, a)
 
 
-def base_rotation(q) -> cs.SX:
+def base_rotation(q: cs.SX) -> cs.SX:
     """World-from-base rotation matrix of a free-flyer configuration (quaternion x, y, z, w)."""
     x, y, z, w = q[3], q[4], q[5], q[6]
     return cs.vertcat(
@@ -91,7 +92,8 @@ class ContactTerms:
             self.swing_z.assign(swing_z)
 
 
-def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q, v, f, mu: float,
+def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q: cs.SX, v: cs.SX,
+                 f: cs.SX, mu: float,
                  clearance: str | None = "constraint", clearance_weight: float = 1e3,
                  foot_radius: float = 0.0) -> ContactTerms:
     """Contact constraints of each foot, to be switched per node by a schedule.
@@ -149,7 +151,7 @@ def add_contacts(prb: Problem, model: RobotModel, feet: list[str], q, v, f, mu: 
     return terms
 
 
-def add_torque_limits(prb: Problem, model: RobotModel, tau_joints,
+def add_torque_limits(prb: Problem, model: RobotModel, tau_joints: cs.SX,
                       scale: float = 1.0) -> Constraint:
     """Joint torques (from inverse dynamics) within ``scale`` times the URDF effort limits."""
     lim = scale * model.joint_effort_limit

@@ -47,6 +47,7 @@ class FrameSpec:
 
     @property
     def placement(self) -> Transform:
+        """The frame's fixed placement in its parent joint's frame, as a symbolic Transform."""
         return Transform.from_numeric(self.R, self.p)
 
 

@@ -72,7 +72,7 @@ def quat_to_rot(quat: Vec) -> cs.SX:
     )
 
 
-def axis_angle_rot(axis: np.ndarray, c, s) -> cs.SX:
+def axis_angle_rot(axis: np.ndarray, c: cs.SX, s: cs.SX) -> cs.SX:
     """Rotation (3x3) about the unit ``axis`` (numeric, (3,)) given ``c = cos``, ``s = sin``.
 
     Coordinate axes give the familiar sparse matrices (SX removes the zero terms).
@@ -91,10 +91,12 @@ class Transform:
 
     @staticmethod
     def identity() -> Transform:
+        """The identity transform."""
         return Transform(cs.SX.eye(3), cs.SX.zeros(3, 1))
 
     @staticmethod
     def from_numeric(R: np.ndarray, p: np.ndarray) -> Transform:
+        """A constant transform from a numeric rotation (3, 3) and translation (3,)."""
         return Transform(cs.SX(np.asarray(R, float)), cs.SX(np.asarray(p, float).reshape(3, 1)))
 
     def __mul__(self, other: Transform) -> Transform:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -54,7 +55,7 @@ def render_frames(res: MotionResult, cfg: RobotConfig, fps: float = 20.0, width:
 
 
 def write_animation(res: MotionResult, cfg: RobotConfig, path: str | Path,
-                    **kwargs) -> Path:
+                    **kwargs: Any) -> Path:
     """Render ``res`` (see :func:`render_frames`) and write it as a looping GIF."""
     from horizon_mpc.sim.render import write_gif
 

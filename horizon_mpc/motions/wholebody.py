@@ -246,7 +246,7 @@ def final_state_errors(model: RobotModel, res: MotionResult, q_final: np.ndarray
             "final_velocity": float(np.max(np.abs(res.v[:, -1])))}
 
 
-def quaternion_error(quat, target: np.ndarray) -> cs.SX:
+def quaternion_error(quat: cs.SX, target: np.ndarray) -> cs.SX:
     """Vector part (3,) of ``target^-1 * quat`` (quaternions ``(x, y, z, w)``).
 
     Zero exactly when the two orientations agree (for ``quat`` in the target's hemisphere);

@@ -141,7 +141,6 @@ class WalkingMpc:
         # m: the ground (the feet's mean height at start) and the base height reference above it
         self.ground_height = 0.0
         self.base_height_above_ground = float(self.wp.base_height)
-        self._standing: dict[str, np.ndarray] = {}
         self._stance_set: np.ndarray | None = None  # the stance last given to the problem
         self.failures = 0
         self._failure_log = (-math.inf, 0)  # (wall time of the last line, bursts not said)
@@ -200,7 +199,6 @@ class WalkingMpc:
         self.solver.set_option("time_budget", None)
         self.solver.solve()
         self.solver.set_option("rti", True)
-        self._standing = {n: wp.prb.get_variable(n).initial_guess for n in ("q", "v", "a", "f")}
         self.t_last = t
         self._prepared_for = None
         self._pose_expected = _pose(q)
@@ -279,10 +277,12 @@ class WalkingMpc:
         runs ``iterations - 1`` whole real-time iterations and prepares the last one
         (quadratisation and backward pass).
         The next :meth:`update` then only rolls the prepared feedback law out from its
-        measured state: a state stamped up to ``settings.max_extrapolation`` away from
-        ``t_next`` is first predicted to ``t_next`` with the plan's acceleration, and the
-        plan starts at ``t_next``; a state further away gets a whole tick. Returns whether a
-        step is prepared (False: the next update runs a whole tick).
+        measured state: a state stamped within ``settings.feedback_tolerance`` of
+        ``t_next`` takes the prepared step as measured; one up to
+        ``settings.max_extrapolation`` away is first predicted to ``t_next`` with the plan's
+        acceleration, and the plan starts at ``t_next``; a state further away than both
+        gets a whole tick. Returns whether a step is prepared (False: the next update runs
+        a whole tick).
         """
         if self.t_last is None:
             raise RuntimeError("prepare() needs a started controller (start() or update())")

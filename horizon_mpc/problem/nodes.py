@@ -98,7 +98,7 @@ def _node_index(n: object, what: str) -> int:
     return int(n)
 
 
-def float_array(value, what: str = "") -> np.ndarray:
+def float_array(value: object, what: str = "") -> np.ndarray:
     """``value`` as a float array; a ``ValueError`` naming ``what`` when it is not numbers
     (text, a ragged list: numpy's own message named neither the variable nor the bound)."""
     try:
@@ -110,7 +110,7 @@ def float_array(value, what: str = "") -> np.ndarray:
                          f"({exc})") from None
 
 
-def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:
+def broadcast_values(value: object, dim: int, n_sel: int, what: str = "") -> np.ndarray:
     """Broadcast a scalar, a (dim,) vector or a (dim, n_sel) array to shape (dim, n_sel).
 
     Raises:
@@ -130,7 +130,8 @@ def broadcast_values(value, dim: int, n_sel: int, what: str = "") -> np.ndarray:
                      f"{n_sel} node(s); give a scalar, ({dim},) or ({dim}, {n_sel})")
 
 
-def bound_values(value, side: float, dim: int, n_sel: int, what: str = "") -> np.ndarray:
+def bound_values(value: object, side: float, dim: int, n_sel: int, what: str = ""
+                 ) -> np.ndarray:
     """:func:`broadcast_values` of a bound, None being no bound (``side``: -inf for a lower
     bound, inf for an upper one; it was taken as a NaN bound and refused), as a whole or as
     an element of a list (``[None, 0]``: no bound on the first component)."""
@@ -143,7 +144,7 @@ def bound_values(value, side: float, dim: int, n_sel: int, what: str = "") -> np
     return broadcast_values(value, dim, n_sel, what)
 
 
-def holds_none(value) -> bool:
+def holds_none(value: object) -> bool:
     """Whether ``value`` is None or a (nested) list or tuple with a None in it."""
     return value is None or (isinstance(value, (list, tuple))
                              and any(holds_none(v) for v in value))

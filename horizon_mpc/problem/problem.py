@@ -6,8 +6,8 @@
 >>> prb.set_dynamics(cs.vertcat(x[1], u))
 >>> prb.set_dt(0.1)
 >>> x.set_bounds([0, 0], [0, 0], nodes=0)
->>> prb.create_final_constraint('goal', x - np.array([1.0, 0.0]))
->>> prb.create_cost('effort', u)
+>>> goal = prb.create_final_constraint('goal', x - np.array([1.0, 0.0]))
+>>> effort = prb.create_cost('effort', u)
 
 Node conventions: ``n_nodes = N`` intervals; states on nodes 0..N, inputs on 0..N-1.
 Per-node functions take the *node arguments* ``(x, u, s, p)``: all states stacked in

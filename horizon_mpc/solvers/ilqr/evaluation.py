@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import ctypes
 import logging
+from typing import Any
 
 import casadi as cs
 import numpy as np
@@ -201,7 +202,7 @@ class CompiledEvaluation:
         self._quad_ptr = ctypes.pointer(q)
 
     @classmethod
-    def create(cls, *args, **kwargs) -> CompiledEvaluation | None:
+    def create(cls, *args: Any, **kwargs: Any) -> CompiledEvaluation | None:
         """An instance, or None when the compiled library is unavailable (riccati_c logs
         why) or the functions cannot be bound (logged here): the solver then evaluates
         with numpy, the same numbers more slowly."""

@@ -24,6 +24,7 @@ from __future__ import annotations
 import ctypes
 import logging
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -192,7 +193,7 @@ class CompiledLqStep:
         self._projection: Projection | None = None
 
     @classmethod
-    def create(cls, *args, **kwargs) -> CompiledLqStep | None:
+    def create(cls, *args: Any, **kwargs: Any) -> CompiledLqStep | None:
         """An instance, or None when the compiled library is unavailable or the blocks cannot
         be bound in place (logged): the solver then calls the wrappers, the same numbers
         more slowly."""

@@ -107,8 +107,9 @@ def _boxed(box: tuple[np.ndarray, np.ndarray] | None, i: int) -> bool:
                                     or np.isfinite(box[1][i]).any())
 
 
-def backward_pass(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
-                  proj: Projection | None = None,
+def backward_pass(A: np.ndarray, B: np.ndarray, lx: np.ndarray, lu: np.ndarray, lxx: np.ndarray,
+                  luu: np.ndarray, lux: np.ndarray, f: np.ndarray, lxN: np.ndarray,
+                  lxxN: np.ndarray, mu: float, proj: Projection | None = None,
                   box: tuple[np.ndarray, np.ndarray] | None = None) -> BackwardResult | None:
     """Riccati recursion with Levenberg-Marquardt regularisation ``mu`` on Q_uu.
 
@@ -180,7 +181,7 @@ def backward_pass(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
     return BackwardResult(K, k, S, s, Qu_all, Quu_all, Qux_all)
 
 
-def linear_rollout(A, B, f, bw: BackwardResult, dx0: np.ndarray,
+def linear_rollout(A: np.ndarray, B: np.ndarray, f: np.ndarray, bw: BackwardResult, dx0: np.ndarray,
                    box: tuple[np.ndarray, np.ndarray] | None = None,
                    ) -> tuple[np.ndarray, np.ndarray]:
     """The full step (dX (N+1, ndx), dU (N, nu)) of the linear-quadratic sub-problem;

@@ -283,8 +283,9 @@ def _sizes(B) -> tuple[int, int, int]:
     return shape
 
 
-def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
-                    proj: Projection | None = None,
+def backward_pass_c(A: np.ndarray, B: np.ndarray, lx: np.ndarray, lu: np.ndarray, lxx: np.ndarray,
+                    luu: np.ndarray, lux: np.ndarray, f: np.ndarray, lxN: np.ndarray,
+                    lxxN: np.ndarray, mu: float, proj: Projection | None = None,
                     pattern: AbPattern | None = None,
                     box: tuple[np.ndarray, np.ndarray] | None = None) -> BackwardResult | None:
     """Riccati recursion with regularisation ``mu`` on Q_uu, in C; see
@@ -355,7 +356,8 @@ def backward_pass_c(A, B, lx, lu, lxx, luu, lux, f, lxN, lxxN, mu: float,
     return BackwardResult(*out)
 
 
-def linear_rollout_c(A, B, f, bw: BackwardResult, dx0: np.ndarray,
+def linear_rollout_c(A: np.ndarray, B: np.ndarray, f: np.ndarray, bw: BackwardResult,
+                     dx0: np.ndarray,
                      box: tuple[np.ndarray, np.ndarray] | None = None,
                      ) -> tuple[np.ndarray, np.ndarray]:
     """The full step (dX (N+1, ndx), dU (N, nu)) of the LQ sub-problem, in C; see
@@ -384,7 +386,8 @@ def _int32(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.int32)
 
 
-def stack_rows_c(layout: EqualityLayout, c, cx, cu, cN, cxN, A, B, gap,
+def stack_rows_c(layout: EqualityLayout, c: np.ndarray, cx: np.ndarray, cu: np.ndarray,
+                 cN: np.ndarray, cxN: np.ndarray, A: np.ndarray, B: np.ndarray, gap: np.ndarray,
                  pattern: AbPattern | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``equality._stack_rows`` in C: the rows ``[D | C | e]`` of every node and their mask.
 
@@ -473,8 +476,9 @@ def _contiguous(name: str, a, shape: tuple[int, ...]) -> np.ndarray:
     return a
 
 
-def step_stats_c(lx, lu, lxN, s, S, Qu, Quu, Qux, dX, dU, pinv
-                 ) -> tuple[float, float, float, float]:
+def step_stats_c(lx: np.ndarray, lu: np.ndarray, lxN: np.ndarray, s: np.ndarray, S: np.ndarray,
+                 Qu: np.ndarray, Quu: np.ndarray, Qux: np.ndarray, dX: np.ndarray, dU: np.ndarray,
+                 pinv: np.ndarray) -> tuple[float, float, float, float]:
     """:func:`.merit.step_stats` in one compiled pass: the same arguments (any array layout;
     non-contiguous ones are copied) and results.
 

@@ -85,7 +85,8 @@ class IlqrSolver(Solver):
     ``line_search``           True           False: every full step (the classic
                                              real-time iteration); a step whose
                                              evaluation is not finite is still rejected
-    ``line_search_steps``     10             halvings of the step tried
+    ``line_search_steps``     10             step lengths tried: 1, 1/2, ...,
+                                             2^-(n-1)
     ``time_budget``           None           s per call: an iteration is not started when
                                              the last one's duration would take the call
                                              past it (the first always runs; status
