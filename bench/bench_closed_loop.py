@@ -79,7 +79,7 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
-from collections.abc import Callable, Sequence  # noqa: E402
+from collections.abc import Callable, Iterator, Sequence  # noqa: E402
 from contextlib import contextmanager  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -174,7 +174,7 @@ class Probe:
         self.rss_build, self.messages = dict(data["rss_build"]), dict(data["messages"])
 
     @contextmanager
-    def installed(self):
+    def installed(self) -> Iterator[None]:
         """Patch the node classes and the mpc_node module for the duration of the block."""
         patches = [
             (MpcNode, "__init__", self._wrap_mpc_init),

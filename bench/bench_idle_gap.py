@@ -83,6 +83,7 @@ def replay(states: list[tuple], gap: float) -> list[float]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Measure both ticks after each gap, write the JSON and the plot, print the table."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--gaps", type=float, nargs="+", default=[0.0, 0.005, 0.02, 0.05],
                     help="idle seconds before each tick")

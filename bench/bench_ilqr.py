@@ -274,7 +274,7 @@ def run_peer(python: str, ticks: int, repeats: int, max_iter: int = 100,
 
 
 # ---------------------------------------------------------------------- summaries
-def jsonable(obj):
+def jsonable(obj: object) -> object:
     """``obj`` with every non-finite float replaced by None (strict JSON)."""
     if isinstance(obj, dict):
         return {str(k): jsonable(v) for k, v in obj.items()}

@@ -92,6 +92,7 @@ def _compile_timed(fn: cs.Function, cache_dir: Path) -> tuple[cs.Function, float
 
 
 def bench_robot(name: str, contacts: list[str], cache_dir: Path) -> dict:
+    """Build, compile and time one robot's model functions against numeric Pinocchio."""
     start = time.perf_counter()
     m = RobotModel.from_example(name)
     id_fn = m.inverse_dynamics(contacts)
@@ -173,6 +174,7 @@ def bench_robot(name: str, contacts: list[str], cache_dir: Path) -> dict:
 
 
 def main() -> None:
+    """Run every robot of the benchmark and write its JSON."""
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     results = {
         "machine": {

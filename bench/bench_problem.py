@@ -24,6 +24,7 @@ import platform
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import casadi as cs
@@ -86,13 +87,15 @@ def plain_cartpole() -> tuple[cs.Function, dict]:
     return solver, {"x0": w0, "lbx": lbw, "ubx": ubw, "lbg": [0.0] * ng, "ubg": [0.0] * ng}
 
 
-def timed(fn) -> float:
+def timed(fn: Callable[[], object]) -> float:
+    """Wall time (s) of one call of ``fn``."""
     t0 = time.perf_counter()
     fn()
     return time.perf_counter() - t0
 
 
 def summary(times: list[float]) -> dict[str, float]:
+    """Minimum and median (ms) of wall times in s."""
     return {"min_ms": 1e3 * min(times), "median_ms": 1e3 * statistics.median(times)}
 
 
@@ -210,6 +213,7 @@ def bench_gnsqp() -> dict:
 
 
 def main() -> None:
+    """Run the problem benchmarks and write their JSON."""
     results = {
         "machine": {"python": platform.python_version(), "casadi": cs.__version__,
                     "cpu": platform.processor() or platform.machine()},

@@ -24,6 +24,7 @@ import platform
 import random
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +44,8 @@ NODE_SECONDS = 4.0
 RESULTS = ROOT / "bench" / "results" / "sim.json"
 
 
-def plain_pd_loop(sim: Simulator, q_ref: np.ndarray, tau_ff: np.ndarray):
+def plain_pd_loop(sim: Simulator, q_ref: np.ndarray, tau_ff: np.ndarray
+                  ) -> Callable[[int], None]:
     """A plain PD loop on the simulator's pybullet body, reading its reference from tables.
 
     ``q_ref``, ``tau_ff``: (steps, nj) per-step reference (a table lookup: the least a
@@ -148,6 +150,7 @@ def node_realtime_factor(state_rate: float) -> float:
 
 
 def main() -> dict:
+    """Run the simulator benchmarks; returns (and writes) their results."""
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 101)))
     rates = physics_rates()

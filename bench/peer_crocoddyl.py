@@ -57,7 +57,7 @@ PROFILE = {"linearise": "SolverDDP::calcDiff", "backward": "SolverDDP::backwardP
 PROFILE_TOTAL = "SolverFDDP::solve"
 
 
-def build(step_knots: int = TROT["stepKnots"]):
+def build(step_knots: int = TROT["stepKnots"]) -> tuple:
     """The trotting problem, its FDDP solver and the cold initial guess.
 
     Returns ``(gait, problem, solver, xs0, us0)``; ``gait`` is the
@@ -82,7 +82,8 @@ def _trot(gait, x0: np.ndarray, step_knots: int):
     return problem
 
 
-def measure_converging(solver, xs0, us0, repeats: int, max_iter: int) -> dict:
+def measure_converging(solver: crocoddyl.SolverFDDP, xs0: list, us0: list, repeats: int,
+                       max_iter: int) -> dict:
     """Cold converging solves: wall time, iterations, time per iteration (ms)."""
     solves = []
     for _ in range(repeats):
@@ -116,7 +117,8 @@ def _future_models(gait, solver, xs0, us0, n: int, step_knots: int, max_iter: in
     return models[:n]
 
 
-def measure_ticks(gait, solver, xs0, us0, ticks: int, step_knots: int,
+def measure_ticks(gait: object, solver: crocoddyl.SolverFDDP, xs0: list, us0: list, ticks: int,
+                  step_knots: int,
                   max_iter: int, profile: bool = False, pace: float = 0.0) -> dict:
     """Warm MPC ticks: shift the horizon by one node, then one FDDP iteration (ms).
 
@@ -162,7 +164,8 @@ def measure_ticks(gait, solver, xs0, us0, ticks: int, step_knots: int,
     return out
 
 
-def profile_converging(solver, xs0, us0, max_iter: int) -> dict:
+def profile_converging(solver: crocoddyl.SolverFDDP, xs0: list, us0: list, max_iter: int
+                       ) -> dict:
     """One converging solve under Crocoddyl's profiler: phase times per iteration (ms)."""
     crocoddyl.stop_watch_reset_all()
     crocoddyl.enable_profiler()

@@ -1,9 +1,16 @@
 """Small optimal control problems, and a trotting go2 MPC, shared by the solver tests."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import casadi as cs
 import numpy as np
 
 from horizon_mpc import Problem
+
+if TYPE_CHECKING:
+    from horizon_mpc.mpc import WalkingMpc
 
 
 def pendulum_swing_up(u_max: float, n_nodes: int = 60) -> Problem:
@@ -21,7 +28,8 @@ def pendulum_swing_up(u_max: float, n_nodes: int = 60) -> Problem:
     return prb
 
 
-def planar_double_integrator_at_rest(n_nodes: int, dt: float = 0.1):
+def planar_double_integrator_at_rest(n_nodes: int, dt: float = 0.1
+                                     ) -> tuple[Problem, cs.SX, cs.SX, cs.SX]:
     """A point in the plane (position ``p``, velocity ``v``, acceleration input ``a``, 2 each)
     starting at rest at the origin; returns ``(prb, p, v, a)`` for the caller's terms."""
     prb = Problem(n_nodes)
@@ -45,7 +53,7 @@ def double_integrator_with_a_nan_derivative_at_rest() -> Problem:
     return prb
 
 
-def trotting_go2_mpc(ticks: int):
+def trotting_go2_mpc(ticks: int) -> WalkingMpc:
     """A go2 ``WalkingMpc`` started standing and ticked ``ticks`` times (0.02 s apart, the
     state held) under a forward, sideways and turning command: trotting, so its problem has
     projected rows, stance changes and terminal rows."""
