@@ -161,7 +161,9 @@ def function_name(text: str) -> str:
     libm function or CasADi's own ``casadi_`` prefix (``sin``, ``int``, ``casadi_f0`` did not
     compile)."""
     out = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", text)).strip("_")
-    if not out[:1].isalpha() or out in _C_RESERVED or out.startswith("casadi_"):
+    if not out:  # no ASCII letter or digit at all (a frame named '脚' or '-': 'f_' made
+        out = "f"  # 'jac_f__LOCAL' of its Jacobian, which CasADi refused)
+    elif not out[:1].isalpha() or out in _C_RESERVED or out.startswith("casadi_"):
         out = "f_" + out
     if len(out) > 64:
         out = f"{out[:55].rstrip('_')}_{hashlib.sha256(out.encode()).hexdigest()[:8]}"

@@ -244,6 +244,75 @@ def test_malformed_urdf_is_reported():
         RobotModel.from_urdf('<robot name="x"><link name="a"></robot>')
 
 
+def _one_joint_urdf(inertial: str = "", limit: str = 'effort="10" velocity="5"',
+                    child: str = "arm", joint: str = "j") -> str:
+    return (f'<robot name="r"><link name="base"/><link name="{child}">{inertial}</link>'
+            f'<joint name="{joint}" type="revolute"><parent link="base"/>'
+            f'<child link="{child}"/><axis xyz="0 1 0"/>'
+            f'<limit lower="-1" upper="1" {limit}/></joint></robot>')
+
+
+@pytest.mark.parametrize("inertial", [
+    '<inertial><mass value="2kg"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" '
+    'iyz="0"/></inertial>',
+    '<inertial><mass value="2"/><inertia ixx="0.1kg*m^2" iyy="1" izz="1" ixy="0" ixz="0" '
+    'iyz="0"/></inertial>',
+], ids=["mass_with_unit", "inertia_with_unit"])
+def test_an_inertial_the_parser_cannot_read_is_refused(inertial):
+    """urdfdom dropped it with a line on stderr and the link became massless (or lost its
+    rotational inertia): a model of 0 kg, no gravity torque, no error (a QA finding)."""
+    with pytest.raises(ValueError, match="malformed URDF string: .*Could not parse inertial"):
+        RobotModel.from_urdf(_one_joint_urdf(inertial), floating_base=False)
+
+
+def test_a_negative_mass_is_refused_by_link():
+    inertial = ('<inertial><mass value="-1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" '
+                'ixz="0" iyz="0"/></inertial>')
+    with pytest.raises(ValueError, match=r"link\(s\) of negative mass: arm \(-1 kg\)"):
+        RobotModel.from_urdf(_one_joint_urdf(inertial), floating_base=False)
+
+
+def test_negative_effort_or_velocity_limits_are_named_by_joint():
+    """Pinocchio refused them as 'min_effort are greater than max_effort', naming no joint."""
+    with pytest.raises(ValueError, match=r"negative limits: j\.effort = -3"):
+        RobotModel.from_urdf(_one_joint_urdf(limit='effort="-3" velocity="5"'),
+                             floating_base=False)
+    with pytest.raises(ValueError, match=r"negative limits: j\.velocity = -5"):
+        RobotModel.from_urdf(_one_joint_urdf(limit='effort="3" velocity="-5"'),
+                             floating_base=False)
+
+
+def test_names_pinocchio_gives_its_own_frames_are_refused():
+    """A link 'universe' was shadowed by the world frame (fk gave the origin), a joint
+    'root_joint' by the free-flyer (fk gave the base)."""
+    with pytest.raises(ValueError, match="link 'universe'.*rename it"):
+        RobotModel.from_urdf(_one_joint_urdf(child="universe"), floating_base=False)
+    with pytest.raises(ValueError, match="joint 'root_joint'.*rename it"):
+        RobotModel.from_urdf(_one_joint_urdf(joint="root_joint"), floating_base=True)
+    # without a free-flyer the name is the URDF's own
+    m = RobotModel.from_urdf(_one_joint_urdf(joint="root_joint"), floating_base=False)
+    assert m.joint_names == ["root_joint"]
+
+
+@pytest.mark.parametrize("frame", ["脚", "-", "_"])
+def test_a_frame_named_without_ascii_letters_gets_every_function(frame):
+    """'f_' + '_LOCAL_WORLD_ALIGNED' made a name with '__', which CasADi refused: the
+    Jacobian and frame velocity of such a frame raised."""
+    m = RobotModel.from_urdf(_one_joint_urdf(
+        '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" '
+        'iyz="0"/></inertial>', child=frame), floating_base=False)
+    q, v = np.array([0.3]), np.array([0.5])
+    data = m.pin_model.createData()
+    pin.forwardKinematics(m.pin_model, data, q, v)
+    pin.updateFramePlacements(m.pin_model, data)
+    fid = m.pin_model.getFrameId(frame)
+    J = pin.computeFrameJacobian(m.pin_model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+    np.testing.assert_allclose(np.asarray(m.jacobian(frame)(q)), np.reshape(J, (6, 1)),
+                               atol=1e-12)
+    assert np.asarray(m.frame_velocity(frame)(q, v)).size == 6
+    assert np.asarray(m.frame_acceleration(frame)(q, v, np.zeros(1))).size == 6
+
+
 def test_unknown_reference_configuration_lists_the_available_ones():
     with pytest.raises(UnknownNameError, match=r"'sitting'.*standing"):
         model("go2").reference_configuration("sitting")
@@ -257,7 +326,8 @@ def test_unsupported_joint_type_is_rejected():
         '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>'
         '<joint name="j" type="planar"><parent link="a"/><child link="b"/></joint></robot>'
     )
-    with pytest.raises(NotImplementedError, match="not supported"):
+    with pytest.raises(NotImplementedError, match="joint 'j': joint type JointModelPlanar "
+                       "is not supported"):  # the joint named (session 32)
         RobotModel.from_urdf(urdf, floating_base=False)
 
 

@@ -119,8 +119,9 @@ def _classify(jmodel: pin.JointModel, name: str = "") -> tuple[str, np.ndarray]:
     # too, and its inner placements would be dropped without a word
     if short not in _ONE_AXIS_JOINTS:
         raise NotImplementedError(
-            f"joint type {short} is not supported; supported: free-flyer root, revolute, "
-            "prismatic and continuous joints (see horizon_mpc.model.joints)"
+            f"joint {name!r}: joint type {short} is not supported; supported: free-flyer "
+            "(URDF 'floating'), revolute, prismatic and continuous joints (see "
+            "horizon_mpc.model.joints)"
         )
     jdata = jmodel.createData()
     jmodel.calc(jdata, _neutral(jmodel))

@@ -52,16 +52,81 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
             model = build()
         except (ValueError, RuntimeError) as exc:
             error = exc
+    text = urdf if is_xml else path.read_text(errors="replace")
+    tree = _parsed(text)
     if model is not None:
+        # urdfdom drops an <inertial> it cannot read (mass "2kg") with a line on stderr and
+        # builds the link massless: a model that weighs nothing, without a word
+        unread = [_said(line) for line in said if "Could not parse" in line]
+        if unread:
+            raise ValueError(f"malformed {source}: {'; '.join(unread)}")
+        if tree is not None:
+            _check_names(tree, floating_base, source)
+            _check_inertials(tree, source)
         _check_root(model, floating_base, source)
-        _warn_mimic_joints(urdf if is_xml else path.read_text(errors="replace"), source)
+        _warn_mimic_joints(tree, source)
         return model
     # urdfdom prints the reason (a joint without limits, an unknown link) on stderr and
     # raises "does not contain a valid URDF model" only
-    reason = "; ".join(line.strip().removeprefix("Error:").strip() for line in said
+    reason = "; ".join(_said(line) for line in said
                        if line.strip() and not line.strip().startswith("at line "))
+    negative = _negative_limits(tree) if tree is not None else []
+    if negative:  # Pinocchio's own words: "min_effort are greater than max_effort"
+        reason = "; ".join(filter(None, (reason, "negative limits: " + ", ".join(negative))))
     raise ValueError(f"malformed {source}: {error}" + (f" ({reason})" if reason else "")) \
         from error
+
+
+def _said(line: str) -> str:
+    return line.strip().removeprefix("Error:").strip()
+
+
+def _parsed(text: str) -> ElementTree.Element | None:
+    """The URDF's XML root, or None where ElementTree cannot read what Pinocchio did."""
+    try:
+        return ElementTree.fromstring(text.lstrip("\ufeff").encode())
+    except ElementTree.ParseError:
+        return None
+
+
+def _negative_limits(root: ElementTree.Element) -> list[str]:
+    """``joint.attribute = value`` of every negative effort or velocity limit."""
+    out = []
+    for joint in root.iter("joint"):
+        for limit in joint.findall("limit"):
+            for key in ("effort", "velocity"):
+                with contextlib.suppress(TypeError, ValueError):
+                    if float(limit.get(key)) < 0:
+                        out.append(f"{joint.get('name', '?')}.{key} = {limit.get(key)}")
+    return out
+
+
+def _check_names(root: ElementTree.Element, floating_base: bool, source: str) -> None:
+    """ValueError for a link or joint named as one Pinocchio adds itself: its world frame
+    ``universe`` (the link could not be looked up: ``fk('universe')`` gave the world
+    origin) and, with ``floating_base``, the free-flyer ``root_joint``."""
+    clashes = ["link 'universe' (Pinocchio's world frame)" for link in root.iter("link")
+               if link.get("name") == "universe"]
+    if floating_base:
+        clashes += ["joint 'root_joint' (the free-flyer floating_base adds)"
+                    for joint in root.iter("joint") if joint.get("name") == "root_joint"]
+    if clashes:
+        raise ValueError(f"{source}: {', '.join(clashes)} has the name of a joint or frame "
+                         "the model adds itself: rename it in the URDF")
+
+
+def _check_inertials(root: ElementTree.Element, source: str) -> None:
+    """ValueError for a link of negative mass (Pinocchio builds it: a robot of -1 kg). Its
+    rotational inertia is not checked: example-robot-data's own icub, romeo and tiago have
+    negative principal moments, and go1, b1, anymal and hyq break the triangle inequality."""
+    bad = []
+    for link in root.iter("link"):
+        mass = link.find("inertial/mass")
+        with contextlib.suppress(AttributeError, TypeError, ValueError):
+            if float(mass.get("value")) < 0:
+                bad.append(f"{link.get('name', '?')} ({mass.get('value')} kg)")
+    if bad:
+        raise ValueError(f"{source}: link(s) of negative mass: {', '.join(bad)}")
 
 
 @contextlib.contextmanager
@@ -79,13 +144,11 @@ def _stderr_captured() -> Iterator[list[str]]:
         lines.extend(out.text.splitlines())
 
 
-def _warn_mimic_joints(text: str, source: str) -> None:
+def _warn_mimic_joints(root: ElementTree.Element | None, source: str) -> None:
     """Warn about URDF mimic joints: Pinocchio's URDF parser (as used here) makes each one
     an independent, actuated degree of freedom, and nothing in the model couples it to the
     joint it mimics."""
-    try:
-        root = ElementTree.fromstring(text.lstrip("\ufeff").encode())
-    except ElementTree.ParseError:  # Pinocchio read it; nothing to say about mimics here
+    if root is None:  # Pinocchio read it; nothing to say about mimics here
         return
     # a fixed joint's mimic moves nothing (talos' gripper has six: the warning named joints
     # the model does not have)
