@@ -667,3 +667,36 @@ def test_cache_command_line_on_an_unreadable_folder_unremovable_files_and_builds
             codegen_cli.main([command])
         assert exited.value.code == 1
         assert "Permission denied" in capsys.readouterr().err
+
+
+def test_a_library_built_while_waiting_for_its_lock_is_not_built_again(cache):
+    """Two nodes starting together on an empty cache each compiled every function (86 s
+    each for go2 on 2 cores, an auditor's): a build waits for the one in progress and
+    finds the library built."""
+    import threading
+
+    lib = cache / _lib("probe")
+    compiles: list[str] = []
+
+    def source(work: Path) -> list[str]:
+        compiles.append(work.name)
+        (work / "probe.c").write_text("int probe(void) { return 0; }\n")
+        return [*codegen._FLAGS, str(work / "probe.c")]
+
+    built: list[bool] = []
+    waiter = threading.Thread(
+        target=lambda: built.append(codegen.build_shared_library(lib, source, "probe")))
+    with codegen.build_lock(lib):  # another process is building it
+        waiter.start()
+        time.sleep(0.5)
+        assert waiter.is_alive() and not compiles  # waiting, not compiling
+        codegen._build_unlocked(lib, source, "probe")  # the other process's build
+    waiter.join(timeout=30)
+    assert built == [False] and len(compiles) == 1
+    assert codegen.library_damage(lib) is None
+    # without a build in progress it compiles (and says so)
+    lib.unlink()
+    assert codegen.build_shared_library(lib, source, "probe") is True and len(compiles) == 2
+    # clear removes the locks of the libraries it removed
+    codegen.prune_cache(cache, max_bytes=0, spare_s=0.0)
+    assert not list((cache / ".locks").glob("*.lock"))

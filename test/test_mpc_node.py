@@ -1787,9 +1787,14 @@ def test_the_librarys_warnings_reach_the_ros_loggers(monkeypatch):
         def error(self, text):
             got.append((self.name, "error", text))
 
+        def info(self, text):
+            got.append((self.name, "info", text))
+
     monkeypatch.setattr(rclpy.logging, "get_logger", Logger)
     lib = logging.getLogger("horizon_mpc")
-    before = list(lib.handlers)
+    progress = logging.getLogger("horizon_mpc.codegen")
+    before, before_progress = list(lib.handlers), list(progress.handlers)
+    level = progress.level
     try:
         forward_library_warnings()
         forward_library_warnings()  # idempotent
@@ -1797,10 +1802,16 @@ def test_the_librarys_warnings_reach_the_ros_loggers(monkeypatch):
         logging.getLogger("horizon_mpc.mpc.controller").warning("ILQR failed (%s)", "rti")
         logging.getLogger("horizon_mpc.mpc.controller").info("not forwarded")
         logging.getLogger("horizon_mpc.codegen").error("compiling failed")
+        # the compilation's progress too (a first start compiled for minutes in silence),
+        # once each
+        logging.getLogger("horizon_mpc.codegen").info("compiling %s ...", "fk_foot")
         assert got == [("horizon_mpc.mpc.controller", "warning", "ILQR failed (rti)"),
-                       ("horizon_mpc.codegen", "error", "compiling failed")]
+                       ("horizon_mpc.codegen", "error", "compiling failed"),
+                       ("horizon_mpc.codegen", "info", "compiling fk_foot ...")]
     finally:
         lib.handlers[:] = before
+        progress.handlers[:] = before_progress
+        progress.setLevel(level)
 
 
 def test_input_notes_of_different_kinds_are_throttled_apart():
@@ -2313,6 +2324,34 @@ def test_cmd_vel_from_a_best_effort_publisher_is_heard_by_default_else_named(
     finally:
         executor.shutdown()
         joystick.destroy_node()
+        node.destroy_node()
+
+
+def test_a_second_clock_publisher_is_named(context, walking_mpc, monkeypatch):
+    """Two simulators on one /clock (two robots, /clock not remapped): the node's warnings
+    blamed a simulator reset, old states or use_sim_time (an auditor's two-robot graph)."""
+    from rosgraph_msgs.msg import Clock
+
+    node = sim_time_node(context, walking_mpc)
+    log = _Logger()
+    monkeypatch.setattr(node, "get_logger", lambda: log)
+    sims = [Node(f"sim{k}", namespace=f"/r{k}", context=context) for k in (1, 2)]
+    try:
+        sims[0].create_publisher(Clock, "/clock", 10)
+        node._check_input_types()
+        assert not [w for w in log.warnings if "/clock" in w]  # one simulator: fine
+        sims[1].create_publisher(Clock, "/clock", 10)
+        end = time.monotonic() + 5.0
+        while time.monotonic() < end and not log.warnings:
+            node._check_input_types()
+            time.sleep(0.05)
+        node._check_input_types()
+        assert len(log.warnings) == 1, log.warnings
+        assert "/clock has 2 publishers (/r1/sim1, /r2/sim2)" in log.warnings[0]
+        assert "-r /clock:=/<namespace>/clock" in log.warnings[0]
+    finally:
+        for sim in sims:
+            sim.destroy_node()
         node.destroy_node()
 
 

@@ -33,6 +33,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from horizon_mpc.closed_loop_report import FALL_HEIGHT, FALL_TILT
+from horizon_mpc.codegen import default_cache_dir
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.model import RobotModel
@@ -255,6 +256,10 @@ class MpcNode(MpcParameters, Node):
                                 str(self._p("robot_description")))
             model = model if model is not None else RobotModel.from_config(cfg)
             _check_joints(model)  # before the build (tens of seconds)
+            self.get_logger().info(
+                f"building the {cfg.name} walking MPC: its compiled functions load from the "
+                f"cache ({default_cache_dir()}) or, on a first start, are compiled (tens of "
+                "seconds to minutes)")
             mpc = WalkingMpc(cfg, model, settings=settings, iterations=self._p("iterations"))
         else:
             _check_joints(mpc.model)
@@ -440,6 +445,20 @@ class MpcNode(MpcParameters, Node):
                                     "node subscribes reliable: none of its messages arrive; "
                                     f"start the node with -p {parameter}:=best_effort",
                                     key=f"{sub.topic_name} best effort")
+        if self.get_parameter("use_sim_time").value:
+            # two simulators on one /clock (two robots in one graph): the sim time jumps
+            # between them, and the warnings blamed a simulator reset or use_sim_time
+            clock = self.resolve_topic_name("/clock")
+            publishers = self.get_publishers_info_by_topic(clock)
+            if len(publishers) > 1:
+                who = sorted(f"{p.node_namespace.rstrip('/')}/{p.node_name}"
+                             for p in publishers)
+                self._warn_once("clock_publishers",
+                                f"{clock} has {len(publishers)} publishers ({', '.join(who)}):"
+                                " this node's sim time jumps between their clocks and its "
+                                "states look old, new or reset; with a simulator per robot, "
+                                "remap /clock per robot (-r /clock:=/<namespace>/clock on "
+                                "both of its nodes)", key=str(len(publishers)))
 
     def current_command(self) -> np.ndarray:
         """The command to use now: the last cmd_vel, or zero once it is older than

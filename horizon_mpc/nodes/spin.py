@@ -305,17 +305,33 @@ class _RosLogHandler(logging.Handler):
                 logger.fatal(text)
             elif record.levelno >= logging.ERROR:
                 logger.error(text)
-            else:
+            elif record.levelno >= logging.WARNING:
                 logger.warning(text)
+            else:
+                logger.info(text)
         except Exception:  # noqa: BLE001 - logging must never raise into the caller
             self.handleError(record)
 
 
+#: library loggers whose INFO lines reach the ROS loggers too: the compilation's progress
+#: (a first start compiles for tens of seconds to minutes, and the node said nothing)
+PROGRESS_LOGGERS = ("horizon_mpc.codegen", "horizon_mpc.solvers.ilqr.riccati_c")
+
+
 def forward_library_warnings() -> None:
     """Send the library's warnings (Python ``logging`` under ``horizon_mpc``, e.g. "ILQR
-    failed ...: back to the standing warm start") to the ROS loggers, so they reach the
-    console and /rosout like the node's own. Idempotent."""
+    failed ...: back to the standing warm start") and the compilation's progress (the INFO
+    lines of :data:`PROGRESS_LOGGERS`: "compiling NAME ...") to the ROS loggers, so they
+    reach the console and /rosout like the node's own. Idempotent."""
     lib = logging.getLogger("horizon_mpc")
     if not any(isinstance(h, _RosLogHandler) for h in lib.handlers):
-        handler = _RosLogHandler(logging.WARNING)
-        lib.addHandler(handler)
+        lib.addHandler(_RosLogHandler(logging.WARNING))
+    for name in PROGRESS_LOGGERS:
+        logger = logging.getLogger(name)
+        if not any(isinstance(h, _RosLogHandler) for h in logger.handlers):
+            handler = _RosLogHandler(logging.INFO)
+            # below WARNING only: the warnings propagate to the library's handler
+            handler.addFilter(lambda record: record.levelno < logging.WARNING)
+            logger.addHandler(handler)
+            if logger.getEffectiveLevel() > logging.INFO:
+                logger.setLevel(logging.INFO)

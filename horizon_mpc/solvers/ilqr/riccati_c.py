@@ -92,9 +92,13 @@ def _build(lib: Path) -> None:
     """Compile the sources to ``lib`` (:func:`horizon_mpc.codegen.build_shared_library`)."""
     _log.info("compiling %s ...", ", ".join(path.name for path in SOURCES))
     start = time.perf_counter()
-    codegen.build_shared_library(lib, lambda _work: [*FLAGS, *map(str, SOURCES)],
-                                 str(SOURCE.parent))
-    _log.info("compiled the Riccati library in %.1f s -> %s", time.perf_counter() - start, lib)
+    if codegen.build_shared_library(lib, lambda _work: [*FLAGS, *map(str, SOURCES)],
+                                    str(SOURCE.parent)):
+        _log.info("compiled the Riccati library in %.1f s -> %s", time.perf_counter() - start,
+                  lib)
+    else:
+        _log.info("the Riccati library was compiled meanwhile by another process (waited "
+                  "%.1f s): loading it", time.perf_counter() - start)
 
 
 def _report(reason: str, level: int) -> None:
