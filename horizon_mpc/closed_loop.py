@@ -112,6 +112,7 @@ class Recording:
     feet: list[str] = field(default_factory=list)
     wall_time: float = 0.0
     deadline_misses: int = 0  # the MPC node's count (solve longer than the period)
+    overruns: int = 0  # the same with trigger 'state' (lockstep: the simulator waits)
     stale_skips: int = 0  # ticks the MPC node skipped: state older than its state_timeout
     # whole ticks on a state off the prepared tick time (with prepare_ahead)
     prepare_misses: int = 0
@@ -425,6 +426,7 @@ def _run_lockstep(robot: str, iterations: int | None, loop: _Loop,
         finally:  # also for an interrupted run: its figures so far
             rec.wall_time = time.perf_counter() - wall0
             rec.deadline_misses = mpc.deadline_misses
+            rec.overruns = mpc.overruns
             rec.prepare_misses = mpc.mpc.prepare_misses
             rec.stale_skips = mpc.stale_skips
         _final_isolation_check(player, rec, t_player)
@@ -579,6 +581,7 @@ def _copy_ticks(heard: TickRecord, rec: Recording) -> None:
     rec.tick_iterations = list(heard.iterations)
     rec.plan_t, rec.plan_age = list(heard.plan_t), list(heard.plan_age)
     rec.deadline_misses = int(heard.counters["deadline_misses"])
+    rec.overruns = int(heard.counters["overruns"])
     rec.stale_skips = int(heard.counters["stale_skips"])
     rec.prepare_misses = int(heard.counters["prepare_misses"])
 

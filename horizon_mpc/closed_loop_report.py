@@ -163,6 +163,7 @@ def summarise(rec: Recording, segments: Sequence[Segment], mode: str = "lockstep
         "min_base_height": float(q[:, 2].min()) if len(q) else math.nan,
         "max_abs_roll_pitch": float(np.abs(rpy[:, :2]).max()) if len(rpy) else math.nan,
         **ticks,
+        "overruns": rec.overruns,
         "stale_skips": rec.stale_skips,
         "prepare_misses": rec.prepare_misses,
         "mpc_process": rec.mpc_process,

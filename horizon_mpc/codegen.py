@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import fcntl
 import hashlib
 import logging
 import math
@@ -57,6 +56,11 @@ from pathlib import Path
 
 import casadi as cs
 import numpy as np
+
+try:  # POSIX: the build locks (elsewhere builds run unlocked, as they always could)
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
 
 __all__ = [
     "STATS",
@@ -486,7 +490,10 @@ def forget_loaded() -> None:
 
 
 def _build(fn: cs.Function, lib: Path) -> None:
-    def generate(work: Path) -> list[str]:
+    started: list[float] = []
+
+    def generate(work: Path) -> list[str]:  # called once the build's lock is taken
+        started.append(time.perf_counter())
         c_name = f"{fn.name()}.c"
         gen = cs.CodeGenerator(c_name, {"with_header": False})
         gen.add(fn)
@@ -496,14 +503,13 @@ def _build(fn: cs.Function, lib: Path) -> None:
         _log.info("compiling %s (%d kB of C, %s)...", fn.name(), size // 1000, " ".join(opt))
         return [*opt, *_FLAGS, str(work / c_name)]
 
-    start = time.perf_counter()
     if build_shared_library(lib, generate, fn.name()):
         STATS.compiled += 1
-        _log.info("compiled %s in %.1f s -> %s", fn.name(), time.perf_counter() - start, lib)
+        _log.info("compiled %s in %.1f s -> %s", fn.name(), time.perf_counter() - started[0],
+                  lib)
     else:
         STATS.loaded += 1
-        _log.info("%s was compiled meanwhile by another process (waited %.1f s): loading "
-                  "it", fn.name(), time.perf_counter() - start)
+        _log.info("%s was compiled meanwhile by another process: loading it", fn.name())
 
 
 def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
@@ -527,7 +533,7 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
     if shutil.which(CC_ARGV[0]) is None:
         raise FileNotFoundError(f"C compiler {CC_ARGV[0]!r} not found on PATH")
     lib.parent.mkdir(parents=True, exist_ok=True)
-    with build_lock(lib):
+    with build_lock(lib, what):
         if lib.is_file() and library_damage(lib) is None:
             return False
         _build_unlocked(lib, compiler_args, what)
@@ -535,22 +541,32 @@ def build_shared_library(lib: Path, compiler_args: Callable[[Path], list[str]],
 
 
 @contextlib.contextmanager
-def build_lock(lib: Path) -> Iterator[None]:
+def build_lock(lib: Path, what: str = "") -> Iterator[None]:
     """Hold the exclusive advisory lock of building ``lib`` (a ``flock`` on
     ``.locks/<name>.lock`` beside it: released when the block ends or the process dies,
-    so a killed build never leaves it held). Where locks do not work (a file system
-    without them), the block runs unlocked: concurrent builds were always safe, only
-    duplicated."""
+    so a killed build never leaves it held); a wait for another process's build is logged
+    first (naming ``what``, default the library). Where locks do not work (no ``fcntl``,
+    a file system without them), the block runs unlocked: concurrent builds were always
+    safe, only duplicated."""
     locks = lib.parent / ".locks"
     try:
+        if fcntl is None:
+            raise OSError("no fcntl")
         locks.mkdir(exist_ok=True)
         fh = open(locks / f"{lib.name}.lock", "a")  # noqa: SIM115 - closed below
     except OSError:
         yield
         return
     try:
-        with contextlib.suppress(OSError):
-            fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            _log.info("waiting for another process building %s (%s)", what or lib.name,
+                      locks / f"{lib.name}.lock")
+            with contextlib.suppress(OSError):
+                fcntl.flock(fh, fcntl.LOCK_EX)
+        except OSError:  # a file system without locks
+            pass
         yield
     finally:
         fh.close()
@@ -727,6 +743,7 @@ def prune_cache(folder: str | Path | None = None, max_bytes: int | None = -1,
             if _LIBRARY_NAME.fullmatch(orphan.name[:-7]) and not orphan.with_suffix("").exists():
                 with contextlib.suppress(OSError):
                     orphan.unlink()
+    if deleted or max_bytes == 0:
         _remove_orphan_locks(folder)
     if undeletable:
         _log.warning("codegen cache %s: %d libraries could not be removed (%s)", folder,
@@ -741,6 +758,8 @@ def _remove_orphan_locks(folder: Path) -> None:
     """The build locks (:func:`build_lock`) of libraries no longer there, when no build
     holds them (one that starts meanwhile may then build beside another: a duplicate
     build, which was always safe)."""
+    if fcntl is None:
+        return
     for lock in (folder / ".locks").glob("*.lock"):
         if (folder / lock.name[:-5]).exists():
             continue

@@ -468,6 +468,10 @@ def test_the_summary_counts_ticks_per_sim_second_and_keeps_the_bootstrap_apart()
     assert s["tick_time_ms"]["max"] == pytest.approx(30.0)
     assert s["deadline_miss_percent"] == pytest.approx(12.5)  # 1 of the 8 ticks after the bootstrap
     assert s["plan_age_ms"]["median"] == pytest.approx(12.0)
+    # a lockstep run's long ticks are overruns (the simulator waited), not misses
+    rec.deadline_misses, rec.overruns = 0, 2
+    s = summarise(rec, [Segment(0.2)], mode="lockstep")
+    assert (s["deadline_misses"], s["overruns"]) == (0, 2)
 
 
 @pytest.mark.slow

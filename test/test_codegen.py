@@ -669,7 +669,7 @@ def test_cache_command_line_on_an_unreadable_folder_unremovable_files_and_builds
         assert "Permission denied" in capsys.readouterr().err
 
 
-def test_a_library_built_while_waiting_for_its_lock_is_not_built_again(cache):
+def test_a_library_built_while_waiting_for_its_lock_is_not_built_again(cache, caplog):
     """Two nodes starting together on an empty cache each compiled every function (86 s
     each for go2 on 2 cores, an auditor's): a build waits for the one in progress and
     finds the library built."""
@@ -686,13 +686,16 @@ def test_a_library_built_while_waiting_for_its_lock_is_not_built_again(cache):
     built: list[bool] = []
     waiter = threading.Thread(
         target=lambda: built.append(codegen.build_shared_library(lib, source, "probe")))
-    with codegen.build_lock(lib):  # another process is building it
-        waiter.start()
-        time.sleep(0.5)
-        assert waiter.is_alive() and not compiles  # waiting, not compiling
-        codegen._build_unlocked(lib, source, "probe")  # the other process's build
-    waiter.join(timeout=30)
+    with caplog.at_level("INFO", logger="horizon_mpc.codegen"):
+        with codegen.build_lock(lib):  # another process is building it
+            waiter.start()
+            time.sleep(0.5)
+            assert waiter.is_alive() and not compiles  # waiting, not compiling
+            codegen._build_unlocked(lib, source, "probe")  # the other process's build
+        waiter.join(timeout=30)
     assert built == [False] and len(compiles) == 1
+    # the wait is said (a review: a node waiting on a suspended build said nothing)
+    assert "waiting for another process building probe" in caplog.text
     assert codegen.library_damage(lib) is None
     # without a build in progress it compiles (and says so)
     lib.unlink()

@@ -8,6 +8,8 @@ both compiled kernels (AVX2+FMA where the CPU has it, and the baseline ISA).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import casadi as cs
 import numpy as np
 import pytest
@@ -321,12 +323,19 @@ def test_another_library_under_its_name_is_rebuilt_not_a_traceback(compiled, mon
     codegen.checksum_path(lib).write_text(codegen._sha256(lib) + "\n")
     built: list = []
     monkeypatch.setattr(riccati_c, "library_path", lambda: lib)
-    monkeypatch.setattr(riccati_c, "_build", lambda path: (built.append(path), path.write_bytes(
-        compiled.read_bytes())))
+
+    def build(path: Path) -> None:
+        # the wrong library is gone first: a build that finds a whole library in place
+        # keeps it (another process's, since the build locks of session 32), and one
+        # review found the rebuild keeping this one
+        built.append((path, path.exists()))
+        path.write_bytes(compiled.read_bytes())
+
+    monkeypatch.setattr(riccati_c, "_build", build)
     riccati_c._forget()
     with caplog.at_level("WARNING", logger=riccati_c.__name__):
         assert riccati_c.available()
-    assert built == [lib] and "undefined symbol" in caplog.text
+    assert built == [(lib, False)] and "undefined symbol" in caplog.text
     riccati_c._forget()
 
 def test_unavailable_with_no_codegen_says_why(compiled, monkeypatch, caplog):

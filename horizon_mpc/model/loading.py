@@ -57,12 +57,15 @@ def load_pin_model(urdf: str | Path, floating_base: bool = True) -> pin.Model:
     if model is not None:
         # urdfdom drops an <inertial> it cannot read (mass "2kg") with a line on stderr and
         # builds the link massless: a model that weighs nothing, without a word
-        unread = [_said(line) for line in said if "Could not parse" in line]
+        unread = [_said(line) for line in said if "Could not parse inertial" in line]
         if unread:
             raise ValueError(f"malformed {source}: {'; '.join(unread)}")
         if tree is not None:
             _check_names(tree, floating_base, source)
             _check_inertials(tree, source)
+        else:  # (a text Pinocchio's parser reads and ElementTree does not)
+            log.warning("%s: not read as XML here, so its link names and masses are not "
+                        "checked", source)
         _check_root(model, floating_base, source)
         _warn_mimic_joints(tree, source)
         return model
@@ -82,11 +85,22 @@ def _said(line: str) -> str:
 
 
 def _parsed(text: str) -> ElementTree.Element | None:
-    """The URDF's XML root, or None where ElementTree cannot read what Pinocchio did."""
+    """The URDF's XML root, or None where ElementTree cannot read what Pinocchio did. As
+    lenient as that parser where it is easy: blank lines before the XML declaration, and
+    anything after the ``<robot>`` element."""
+    text = text.lstrip("\ufeff \t\r\n")
     try:
-        return ElementTree.fromstring(text.lstrip("\ufeff").encode())
-    except ElementTree.ParseError:
-        return None
+        return ElementTree.fromstring(text.encode())
+    except ElementTree.ParseError as exc:
+        if "junk after document element" not in str(exc):
+            return None
+        line, column = exc.position  # where the junk starts: keep the text before it
+        head = "".join(text.splitlines(keepends=True)[:line - 1])
+        head += text.splitlines(keepends=True)[line - 1][:column]
+        try:
+            return ElementTree.fromstring(head.encode())
+        except ElementTree.ParseError:
+            return None
 
 
 def _negative_limits(root: ElementTree.Element) -> list[str]:

@@ -33,7 +33,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from horizon_mpc.closed_loop_report import FALL_HEIGHT, FALL_TILT
-from horizon_mpc.codegen import default_cache_dir
+from horizon_mpc.codegen import codegen_enabled, default_cache_dir
 from horizon_mpc.config import RobotConfig, load_robot_config
 from horizon_mpc.locomotion import MpcSettings
 from horizon_mpc.model import RobotModel
@@ -162,6 +162,7 @@ class MpcNode(MpcParameters, Node):
         self._last_tick_stamp: int | None = None
         self._clock_seen_ns: int | None = None  # the node clock at the last tick
         self._clock_back = False  # it went back since (until states of before are dropped)
+        self._clock_publishers_since: float | None = None  # several on the clock topic
         self.plan: Plan | None = None
         self.measured_base: np.ndarray | None = None  # (7,) base pose of the last tick's state
         self.ticks = 0
@@ -256,10 +257,11 @@ class MpcNode(MpcParameters, Node):
                                 str(self._p("robot_description")))
             model = model if model is not None else RobotModel.from_config(cfg)
             _check_joints(model)  # before the build (tens of seconds)
-            self.get_logger().info(
-                f"building the {cfg.name} walking MPC: its compiled functions load from the "
-                f"cache ({default_cache_dir()}) or, on a first start, are compiled (tens of "
-                "seconds to minutes)")
+            if codegen_enabled():
+                self.get_logger().info(
+                    f"building the {cfg.name} walking MPC: its compiled functions load from "
+                    f"the cache ({default_cache_dir()}) or, on a first start, are compiled "
+                    "(tens of seconds to minutes)")
             mpc = WalkingMpc(cfg, model, settings=settings, iterations=self._p("iterations"))
         else:
             _check_joints(mpc.model)
@@ -446,19 +448,31 @@ class MpcNode(MpcParameters, Node):
                                     f"start the node with -p {parameter}:=best_effort",
                                     key=f"{sub.topic_name} best effort")
         if self.get_parameter("use_sim_time").value:
-            # two simulators on one /clock (two robots in one graph): the sim time jumps
-            # between them, and the warnings blamed a simulator reset or use_sim_time
-            clock = self.resolve_topic_name("/clock")
-            publishers = self.get_publishers_info_by_topic(clock)
-            if len(publishers) > 1:
-                who = sorted(f"{p.node_namespace.rstrip('/')}/{p.node_name}"
-                             for p in publishers)
-                self._warn_once("clock_publishers",
-                                f"{clock} has {len(publishers)} publishers ({', '.join(who)}):"
-                                " this node's sim time jumps between their clocks and its "
-                                "states look old, new or reset; with a simulator per robot, "
-                                "remap /clock per robot (-r /clock:=/<namespace>/clock on "
-                                "both of its nodes)", key=str(len(publishers)))
+            self._check_clock_publishers()
+
+    def _check_clock_publishers(self) -> None:
+        """Say (once per set of names) that the clock topic has several publishers: two
+        simulators on one /clock (two robots in one graph) make the sim time jump between
+        them, and the warnings blamed a simulator reset or use_sim_time. Publishers of one
+        name are a restarted simulator whose dead participant DDS still lists (up to ~20 s,
+        its lease): said only if that lasts :data:`CLOCK_PUBLISHERS_FOR` s."""
+        clock = self.resolve_topic_name("/clock")
+        publishers = self.get_publishers_info_by_topic(clock)
+        now = time.monotonic()
+        if len(publishers) < 2:
+            self._clock_publishers_since = None
+            return
+        who = sorted("a node" if "_UNKNOWN_" in p.node_name
+                     else f"{p.node_namespace.rstrip('/')}/{p.node_name}" for p in publishers)
+        if self._clock_publishers_since is None:
+            self._clock_publishers_since = now
+        if len(set(who)) > 1 or now - self._clock_publishers_since >= CLOCK_PUBLISHERS_FOR:
+            self._warn_once("clock_publishers",
+                            f"{clock} has {len(publishers)} publishers ({', '.join(who)}): "
+                            "this node's sim time jumps between their clocks and its states "
+                            "look old, new or reset; with a simulator per robot, remap "
+                            "/clock per robot (-r /clock:=/<namespace>/clock on both of its "
+                            "nodes)", key=", ".join(who))
 
     def current_command(self) -> np.ndarray:
         """The command to use now: the last cmd_vel, or zero once it is older than
@@ -605,8 +619,9 @@ class MpcNode(MpcParameters, Node):
     def tick(self) -> bool:
         """One MPC tick on the latest state; returns whether a trajectory was published.
 
-        Ticks never queue: a tick on a state already used does nothing, and an overrun
-        (solve longer than the control period) only counts a deadline miss.
+        Ticks never queue: a tick on a state already used does nothing, and a tick longer
+        than the control period only counts a deadline miss (an overrun with trigger
+        'state', whose lockstep simulator waits).
         """
         if self._joints is None or self._base is None:
             missing = [self._input(n) for n, x in (("joint_states", self._joints),
@@ -906,6 +921,9 @@ _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE,
 #: s: a state this much older than the node's clock is on another clock (sim time against
 #: wall time: ~1.8e9 s), not late
 OTHER_CLOCK_AGE = 3600.0
+#: s that several publishers of one name on the clock topic last before they are said (a
+#: restarted simulator's dead participant stays listed until its DDS lease ends, ~20 s)
+CLOCK_PUBLISHERS_FOR = 30.0
 
 
 def _unset_hint(joints_ns: int, base_ns: int, age: float = 0.0) -> str:

@@ -264,7 +264,8 @@ class TickRecord:
     iterations: list[float] = field(default_factory=list)
     command: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     counters: dict[str, float] = field(default_factory=lambda: {
-        "ticks": 0, "deadline_misses": 0, "stale_skips": 0, "prepare_misses": 0})
+        "ticks": 0, "deadline_misses": 0, "overruns": 0, "stale_skips": 0,
+        "prepare_misses": 0})
 
 
 class MpcMonitor(Node):

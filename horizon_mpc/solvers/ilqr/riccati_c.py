@@ -90,15 +90,18 @@ def library_path() -> Path:
 
 def _build(lib: Path) -> None:
     """Compile the sources to ``lib`` (:func:`horizon_mpc.codegen.build_shared_library`)."""
-    _log.info("compiling %s ...", ", ".join(path.name for path in SOURCES))
-    start = time.perf_counter()
-    if codegen.build_shared_library(lib, lambda _work: [*FLAGS, *map(str, SOURCES)],
-                                    str(SOURCE.parent)):
-        _log.info("compiled the Riccati library in %.1f s -> %s", time.perf_counter() - start,
-                  lib)
+    started: list[float] = []
+
+    def sources(_work: Path) -> list[str]:  # called once the build's lock is taken
+        _log.info("compiling %s ...", ", ".join(path.name for path in SOURCES))
+        started.append(time.perf_counter())
+        return [*FLAGS, *map(str, SOURCES)]
+
+    if codegen.build_shared_library(lib, sources, "the Riccati library"):
+        _log.info("compiled the Riccati library in %.1f s -> %s",
+                  time.perf_counter() - started[0], lib)
     else:
-        _log.info("the Riccati library was compiled meanwhile by another process (waited "
-                  "%.1f s): loading it", time.perf_counter() - start)
+        _log.info("the Riccati library was compiled meanwhile by another process: loading it")
 
 
 def _report(reason: str, level: int) -> None:
@@ -134,6 +137,7 @@ def _load() -> ctypes.CDLL:
             except (OSError, AttributeError) as err:  # a damaged cache entry (another
                 # library under its name: a missing symbol): build it again, once
                 _log.warning("could not load %s (%s); rebuilding it", lib, err)
+                lib.unlink(missing_ok=True)  # else the build finds it there and keeps it
                 _build(lib)
                 _lib = _open(lib)
             return _lib
