@@ -374,6 +374,10 @@ def test_a_walk_duration_off_the_tick_grid_is_rounded_with_a_warning(go2, caplog
         res = run_walk(cfg, "ilqr", st, model=model)
     assert res.n_nodes == 2  # 0.05 s of 0.02 s ticks: rounded to 2 (silently before)
     assert "not a whole number of 0.02 s ticks: walking 2 ticks" in caplog.text
+    # far shorter than the averaging cycles: the mean velocity is of the start-up, and the
+    # summary says so (its warning blamed the command)
+    assert res.summary["window_includes_start_up"] is True
+    assert "averaging over all of it, start-up included" in caplog.text
 
 
 @pytest.mark.slow
@@ -415,6 +419,8 @@ def test_a_walk_that_breaks_the_physics_is_not_solved(tmp_path, capsys):
     stats = summary["solver_stats"]
     # why, on the console too (it was only in summary.json)
     assert f"walk: NOT solved (ilqr status: {stats['status']}) in" in printed
+    assert "(the figures below are of the plan the solver stopped at, not of a solved walk" \
+        in printed
     assert stats["success"] is False and stats["status"] != "consistent"
     # what it executed breaks the physics, or its first horizon never converged
     assert (summary["results"]["max_dynamics_defect"] > 1e-6
@@ -638,12 +644,32 @@ def test_leap_keeps_the_trunk_above_the_ground(leap):
     assert lowest == pytest.approx(res.summary["min_trunk_height"], abs=1e-9)
 
 
+def test_the_leap_replay_is_never_softer_than_the_robots_own_joint_gains():
+    """Every robot was replayed with go2's 100 / 3: hyq (its own 300 / 8) landed 0.12 m
+    ahead of its 0.4 m plan, not standing (an auditor's; with its own gains 0.334 m)."""
+    import dataclasses
+
+    from horizon_mpc.motions.leap import LeapSettings, replay_gains
+
+    for robot, gains in (("go2", (100.0, 3.0)), ("hyq", (300.0, 8.0)),
+                         ("b1", (150.0, 4.0)), ("centauro", (400.0, 10.0)),
+                         ("solo12", (5.0, 0.15))):  # solo12: its own leap setting
+        st = _settings("leap", LeapSettings, robot)
+        assert replay_gains(st, load_robot_config(robot)) == gains, robot
+    # per-joint gains of a config: raised joint by joint
+    cfg = load_robot_config("go2")
+    cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, kp=[50.0] * 6 + [200.0] * 6))
+    kp, _ = replay_gains(LeapSettings(), cfg)
+    assert kp == [100.0] * 6 + [200.0] * 6
+
+
 @pytest.mark.slow
 def test_leap_replayed_open_loop_in_pybullet_lands_upright_near_the_target(leap):
+    from horizon_mpc.motions.leap import replay_gains
     from horizon_mpc.motions.replay import replay
 
     res, st, model, cfg = leap
-    rep = replay(res, cfg, model.pin_model, st.replay_kp, st.replay_kd, settle=1.0)
+    rep = replay(res, cfg, model.pin_model, *replay_gains(st, cfg), settle=1.0)
     assert abs(rep.displacement[0] - st.distance) <= 0.15
     assert abs(rep.displacement[1]) <= 0.15
     assert np.all(np.abs(rep.final_rpy[:2]) < 0.2)  # upright: roll, pitch below ~11 deg
@@ -941,6 +967,11 @@ def test_a_walk_far_from_its_velocity_reference_or_skimming_the_ground_is_warned
     assert walk_warnings({**walk, "velocity_error": 0.5}) == [
         "the walk's mean velocity (vx, vy, wz) [0.29, 0.01, 0.0] is 50% off its reference "
         "[0.3, 0.0, 0.0]: the motion is consistent, but does not follow the command"]
+    # a walk shorter than the averaging window: its start from standing, not the command
+    # (an auditor's 0.6 s walk was told it does not follow the command)
+    short = walk_warnings({**walk, "velocity_error": 0.5, "window_includes_start_up": True})
+    assert len(short) == 1 and "its start from standing included" in short[0] \
+        and "does not follow the command" not in short[0]
     standing = {"velocity_reference": [0.0, 0.0, 0.0], "mean_velocity": [0.25, 0.0, 0.0],
                 "velocity_error": 0.25}
     assert "0.250 m/s for a zero reference" in walk_warnings(standing)[0]

@@ -287,17 +287,18 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
     wall = time.perf_counter() - t0
     extra = {"settings": dataclasses.asdict(settings), "wall_time": wall}
     if args.motion == "leap" and not args.no_replay:
+        from horizon_mpc.motions.leap import replay_gains
         from horizon_mpc.motions.replay import replay, replay_summary
 
+        kp, kd = replay_gains(settings, cfg)
         try:
-            rep = replay(res, cfg, model.pin_model, settings.replay_kp, settings.replay_kd)
+            rep = replay(res, cfg, model.pin_model, kp, kd)
         except ValueError as exc:  # a plan the simulator refuses (an unsolved one: a joint
             # jumping at 110 rad/s), which was a traceback with nothing written
-            extra["pybullet_replay"] = {"kp": settings.replay_kp, "kd": settings.replay_kd,
-                                        "not_replayed": str(exc)}
+            extra["pybullet_replay"] = {"kp": kp, "kd": kd, "not_replayed": str(exc)}
         else:
             extra["pybullet_replay"] = {
-                "kp": settings.replay_kp, "kd": settings.replay_kd,
+                "kp": kp, "kd": kd,
                 **replay_summary(rep, res, float(res.summary["target"][0] - res.q[0, 0]))}
     render = {"yaw": 90.0} if args.motion == "leap" else {}
     _checkpoint()
@@ -312,6 +313,9 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
     status = "" if ok else f" ({solver} status: {res.stats.get('status', 'unknown')})"
     print(f"{args.motion}: {'solved' if ok else 'NOT solved'}{status} in {wall:.1f} s{inner}; "
           f"outputs in {out}: {', '.join(p.name for p in files.values())}")
+    if not ok:  # a GN-SQP leap's untouched guess read as a leap (an auditor's)
+        print("  (the figures below are of the plan the solver stopped at, not of a solved "
+              f"{args.motion}: max_dynamics_defect and the status say how far from one)")
     for key, value in res.summary.items():
         if not isinstance(value, list) or len(value) <= 4:
             print(f"  {key}: {value}")
@@ -372,8 +376,13 @@ def walk_warnings(summary: dict) -> list[str]:
         mean = [round(x, 3) for x in summary["mean_velocity"]]
         off = (f"{error:.0%} off its reference" if any(reference) else
                f"{error:.3f} m/s for a zero reference")
-        out.append(f"the walk's mean velocity (vx, vy, wz) {mean} is {off} {reference}: the "
-                   "motion is consistent, but does not follow the command")
+        if summary.get("window_includes_start_up"):  # it blamed the command (an auditor's)
+            out.append(f"the walk's mean velocity (vx, vy, wz) {mean} is {off} {reference}, "
+                       "averaged over the whole walk, its start from standing included: walk "
+                       "longer than average_cycles gait cycles to measure the gait's own")
+        else:
+            out.append(f"the walk's mean velocity (vx, vy, wz) {mean} is {off} {reference}: "
+                       "the motion is consistent, but does not follow the command")
     apex, height = summary.get("swing_apex"), summary.get("step_height")
     if apex and isinstance(height, float) and height > 0 \
             and apex[1] < SWING_APEX_WARNING * height:

@@ -261,6 +261,8 @@ def walk_summary(res: MotionResult, period: float, st: WalkSettings,
     of its path;
     ``force_periodicity``: ``||f(last cycle) - f(cycle before)|| / ||f(last cycle)||``
     (absent for a gait without cycles, ``stand``: the window is then the whole motion);
+    ``window_includes_start_up``: the walk is shorter than ``average_cycles`` cycles, and
+    its mean velocity includes the start from standing;
     ``swing_apex``: ``[lowest, highest]`` apex over the planned swings (m above the foot's
     standing height), beside the gait's ``step_height`` (the clearance is a cost: an apex
     below it is the compromise the weights made).
@@ -279,6 +281,8 @@ def walk_summary(res: MotionResult, period: float, st: WalkSettings,
     out = {"velocity_reference": ref.tolist(), "mean_velocity": mean.tolist(),
            "velocity_error": err, "linear_velocity_error": lin_err, "yaw_rate_error": yaw_err,
            "window": [float(res.t[-n_win - 1]), float(res.t[-1])],
+           # a walk shorter than the averaging cycles: its start from standing is in it
+           "window_includes_start_up": bool(cyclic and n_win < st.average_cycles * n_cycle),
            "gait_period": period,
            "distance": float(np.linalg.norm(res.q[:2, -1] - res.q[:2, 0])),  # net, start to end
            "path_length": float(np.sum(np.linalg.norm(np.diff(res.q[:2], axis=1), axis=0)))}
