@@ -95,8 +95,8 @@ def _parsed(text: str) -> ElementTree.Element | None:
         if "junk after document element" not in str(exc):
             return None
         line, column = exc.position  # where the junk starts: keep the text before it
-        head = "".join(text.splitlines(keepends=True)[:line - 1])
-        head += text.splitlines(keepends=True)[line - 1][:column]
+        lines = text.splitlines(keepends=True)
+        head = "".join(lines[:line - 1]) + lines[line - 1][:column]
         try:
             return ElementTree.fromstring(head.encode())
         except ElementTree.ParseError:

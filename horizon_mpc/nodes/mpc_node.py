@@ -738,18 +738,17 @@ class MpcNode(MpcParameters, Node):
             self.last_prepare_time = time.perf_counter() - wall - self.last_solve_time
         # a tick's work (its latency and the next tick's preparation) must fit its period
         work = self.last_solve_time + self.last_prepare_time
-        if work > self.period and not bootstrap and self.trigger == "state":
-            # a lockstep simulator waits for the answer: the loop runs slower than real
-            # time, no deadline is missed (these were counted as misses until session 32)
-            self.overruns += 1
-            self._warn("overrun", f"tick took {work * 1e3:.1f} ms > period "
-                       f"{self.period * 1e3:.1f} ms: the lockstep loop runs slower than "
-                       f"real time ({self.overruns} such ticks; trigger 'state' misses no "
-                       "deadline)")
-        elif work > self.period and not bootstrap:
-            self.deadline_misses += 1
-            self._warn("deadline", f"tick took {work * 1e3:.1f} ms > period "
-                       f"{self.period * 1e3:.1f} ms ({self.deadline_misses} misses)")
+        if work > self.period and not bootstrap:
+            took = f"tick took {work * 1e3:.1f} ms > period {self.period * 1e3:.1f} ms"
+            if self.trigger == "state":
+                # a lockstep simulator waits for the answer: the loop runs slower than real
+                # time, no deadline is missed (these were counted as misses until session 32)
+                self.overruns += 1
+                self._warn("overrun", f"{took}: the lockstep loop runs slower than real time "
+                           f"({self.overruns} such ticks; trigger 'state' misses no deadline)")
+            else:
+                self.deadline_misses += 1
+                self._warn("deadline", f"{took} ({self.deadline_misses} misses)")
         self._publish_diagnostics(plan, plan_ns, now_ns)
         return True
 
