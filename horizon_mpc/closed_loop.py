@@ -494,7 +494,7 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
                 executor.add_node(node)
             rec.feet = list(sim.sim.feet)
             rec.nominal_height = float(sim.sim.state().q[2])
-            _wait_for_first_plan(executor, sim, monitor, child, ready_timeout)
+            _wait_for_first_plan(executor, sim, monitor, child, pub_cmd, ready_timeout)
             rec.build_time = time.perf_counter() - t_start
             executor.add_node(sim)
             cpu0 = (time.process_time(), process_cpu_seconds(child.pid))
@@ -529,15 +529,18 @@ def _run_realtime(robot: str, iterations: int | None, loop: _Loop, domain_id: in
 
 
 def _wait_for_first_plan(executor: SingleThreadedExecutor, sim: SimNode, monitor: MpcMonitor,
-                         child: MpcProcess, timeout: float) -> None:
-    """Wait until the MPC process is connected, then hold the simulator (one control period
-    per ``HOLD_PERIOD`` of wall time, so that the MPC's sim-clock timer fires) until its
-    first plan (the bootstrap solve) arrives."""
+                         child: MpcProcess, pub_cmd: Publisher, timeout: float) -> None:
+    """Wait until the MPC process is connected (its state and command subscriptions, its
+    trajectory publisher), then hold the simulator (one control period per ``HOLD_PERIOD``
+    of wall time, so that the MPC's sim-clock timer fires) until its first plan (the
+    bootstrap solve) arrives. The profile's first command then reaches the MPC: without the
+    wait for ``cmd_vel`` a late discovery on a loaded machine could lose it for good."""
     def spin() -> None:
         executor.spin_once(timeout_sec=0.05)
 
-    wait_until(lambda: sim.peers_ready, spin, child, timeout,
-               "mpc_node's joint_states subscription and joint_trajectory publisher")
+    wait_until(lambda: sim.peers_ready and pub_cmd.get_subscription_count() > 0, spin, child,
+               timeout, "mpc_node's joint_states and cmd_vel subscriptions and "
+               "joint_trajectory publisher")
     next_step = 0.0
 
     def hold() -> None:
