@@ -10,8 +10,11 @@ compile the derivative Function you need (e.g. a Jacobian) rather than different
 Cache: ``$HORIZON_MPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/horizon_mpc``, else
 ``~/.cache/horizon_mpc``. A library is keyed by a hash of ``fn.serialize()``, the compiler
 command and the CasADi version, so a changed function never loads a stale library. Libraries
-are written under a temporary name and renamed into place: concurrent processes may compile
-the same function, the last rename wins and every reader sees a complete file.
+are written under a temporary name and renamed into place, so every reader sees a complete
+file; processes building the same library take turns on an advisory lock
+(``.locks/<library>.lock``, :func:`build_lock`): the first compiles, the others wait (saying
+so) and load its result. Where locks do not work (no ``fcntl``, a file system without them)
+builds run unlocked and the last rename wins.
 
 A cached library that is damaged (empty, not a shared object, truncated: a disk filled up,
 a copy cut short; or bytes changed inside it, which its SHA-256, kept next to it in
