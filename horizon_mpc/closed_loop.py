@@ -223,9 +223,8 @@ def warn_unreached_segments(segments: Sequence[Segment], cfg: RobotConfig,
                             mpc_parameters: Mapping[str, object] | None = None) -> None:
     """Warn about the segments the MPC's command ramp cannot reach
     (:func:`~horizon_mpc.closed_loop_profile.unreached_segments`), with the node's command
-    limits (:func:`command_limits`: its ``-p max_vx``..., gait and ``max_command_norm``;
-    until session 28 the config's, so a ``-p max_vx`` flip profile went unwarned) and the
-    config's ``max_acceleration``."""
+    limits (:func:`command_limits`: its ``-p max_vx``..., gait and ``max_command_norm``,
+    not the config's alone) and the config's ``max_acceleration``."""
     st = MpcSettings.from_config(cfg)
     try:
         max_velocity, max_norm = command_limits(cfg, mpc_parameters)

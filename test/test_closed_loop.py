@@ -373,9 +373,9 @@ def test_other_robots_walk_forward_with_their_configs_only(robot):
 @pytest.mark.slow
 @pytest.mark.parametrize("robot", ["solo12", "go2"])
 def test_states_sampled_before_the_tick_and_late_plans_do_not_make_it_fall(robot):
-    """The real-time loop's delays in lockstep: states 4 ms before each tick (predicted to it
-    by the node), plans applied 4 ms after their stamp. With a constant-velocity prediction
-    solo12 fell at 2.7 s (vx 1.1 m/s, yaw rate +-2 rad/s), as it did in real time."""
+    """The real-time loop's delays in lockstep: states 4 ms before each tick, plans applied
+    4 ms after their stamp. With a constant-velocity prediction solo12 fell at 2.7 s (vx
+    1.1 m/s, yaw rate +-2 rad/s), as it did in real time."""
     segs = [Segment(STAND), Segment(4.0, vx=0.3)]
     rec = run(robot, segs, mode="lockstep", gif=False, stop_after_fall=0.5,
               sim_parameters={"lockstep_state_offset": 0.004, "lockstep_latency": 0.004})

@@ -340,7 +340,7 @@ def _solve_and_write(args: argparse.Namespace, run: Callable[..., MotionResult],
 #: bounds reaches them within the solver's tolerance)
 TORQUE_RATIO_TOLERANCE = 1e-3
 #: a walk's ``velocity_error`` (relative; m/s for a zero reference) that is warned about:
-#: the shipped walks are within 0.6-12 %
+#: the shipped walks are within 0.6-3.9 % (doc/motions.md)
 VELOCITY_ERROR_WARNING = 0.2
 #: the share of the gait's step height under which a walk's highest swing apex is warned
 #: about (the clearance is a cost: go2's walk lifts its feet 1.9-3.5 cm for its 7 cm,
