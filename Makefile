@@ -48,7 +48,14 @@ export PATH := $(VENV_ABS)/bin:$(PATH)
 export AMENT_PREFIX_PATH := $(VENV_ABS)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))
 export MPLBACKEND ?= Agg
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
+# the benchmark peer: a HORIZON_MPC_PEER_PYTHON of the caller is used as given (no
+# $(PEER_VENV) is built), else $(PEER_VENV)'s, created on demand by `make bench`
+ifdef HORIZON_MPC_PEER_PYTHON
+BENCH_PEER :=
+else
 export HORIZON_MPC_PEER_PYTHON := $(abspath $(PEER_VENV))/bin/python
+BENCH_PEER := peer-venv
+endif
 
 .PHONY: help setup demo test lint bench peer-venv clean FORCE
 
@@ -58,7 +65,7 @@ help:
 	@echo "  make test       set up $(VENV), ruff check + full pytest suite (incl. slow tests)"
 	@echo "  make setup      create/update $(VENV) only (idempotent, fast when nothing changed)"
 	@echo "  make lint       ruff check"
-	@echo "  make bench      run bench/bench_*.py (needs $(PEER_VENV), created on demand)"
+	@echo "  make bench      run bench/bench_*.py (peer: HORIZON_MPC_PEER_PYTHON if set, else $(PEER_VENV), created on demand)"
 	@echo "  make peer-venv  create $(PEER_VENV) with Crocoddyl + pin 4.0 (benchmark peer)"
 	@echo "  make clean      remove build artefacts (build/, *.egg-info); keeps the venvs"
 
@@ -120,7 +127,7 @@ $(PEER_STAMP):
 	@rm -f $(PEER_VENV)/.horizon_mpc-peer-*
 	@touch $@
 
-bench: setup peer-venv
+bench: setup $(BENCH_PEER)
 	@if [ -z "$(BENCH)" ]; then echo "no benchmarks in bench/ yet"; exit 0; fi; \
 	for script in $(BENCH); do \
 		echo "==> $$script"; \

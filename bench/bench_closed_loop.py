@@ -91,9 +91,18 @@ for _p in (ROOT, ROOT / "bench"):  # source checkout without an install; bench_i
         sys.path.insert(0, str(_p))
 
 import bench_ilqr  # noqa: E402
+from cli_checks import (  # noqa: E402
+    output_folder,
+    output_stem,
+    positive_float,
+    positive_int,
+    refuse_duplicates,
+    sibling,
+)
 
 from horizon_mpc.closed_loop import Segment, run  # noqa: E402
 from horizon_mpc.closed_loop_report import render_replay, summarise, write_report  # noqa: E402
+from horizon_mpc.config import load_robot_config  # noqa: E402
 from horizon_mpc.mpc.controller import WalkingMpc  # noqa: E402
 from horizon_mpc.nodes import mpc_node as mpc_node_module  # noqa: E402
 from horizon_mpc.nodes.mpc_node import MpcNode  # noqa: E402
@@ -658,9 +667,11 @@ def peer_round(python: str) -> dict:
     return out
 
 
-def crocoddyl_reference(rounds: Sequence[dict] = (), reason: str = "") -> dict:
+def crocoddyl_reference(rounds: Sequence[dict] = (), reason: str = "",
+                        ilqr_json: Path = ILQR_JSON) -> dict:
     """Crocoddyl's FDDP time per iteration on its go2 trot (ms, median; wall and CPU): from
-    the peer ``rounds`` measured in this run, else read from ``bench/results/ilqr.json``."""
+    the peer ``rounds`` measured in this run, else read from ``ilqr_json`` (the last
+    ``bench_ilqr.py`` results)."""
     if rounds:
         peer = bench_ilqr.summarise_peer(list(rounds))
         per_round = [{"ms_per_iteration": float(np.median(
@@ -681,15 +692,15 @@ def crocoddyl_reference(rounds: Sequence[dict] = (), reason: str = "") -> dict:
                 "pace_s": paced["pace_s"] if paced else None,
                 "nodes": peer["problem"]["nodes"]}
     try:
-        data = json.loads(ILQR_JSON.read_text())
+        data = json.loads(ilqr_json.read_text())
         peer = data["peer"]
         if not peer.get("available"):
-            return {"source": f"{ILQR_JSON.relative_to(ROOT)}: no peer figures",
+            return {"source": f"{_shown(ilqr_json)}: no peer figures",
                     "same_run": False, "ms_per_iteration": None}
     except (OSError, KeyError, json.JSONDecodeError) as exc:
-        return {"source": f"{ILQR_JSON}: unreadable ({exc})", "same_run": False,
+        return {"source": f"{ilqr_json}: unreadable ({exc})", "same_run": False,
                 "ms_per_iteration": None}
-    return {"source": f"{ILQR_JSON.relative_to(ROOT)} (its own run, commit "
+    return {"source": f"{_shown(ilqr_json)} (its own run, commit "
                       f"{(data.get('code') or {}).get('commit', '?')[:7]}, load average "
                       f"{data['machine'].get('loadavg_start')}), NOT this run"
                       + (f"; peer not run here: {reason}" if reason else ""),
@@ -700,13 +711,22 @@ def crocoddyl_reference(rounds: Sequence[dict] = (), reason: str = "") -> dict:
             "nodes": peer["problem"]["nodes"]}
 
 
+def _shown(path: Path) -> str:
+    """``path`` relative to the repository when inside it."""
+    try:
+        return str(path.relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
 # ---------------------------------------------------------------------- aggregate
 def compact(name: str, summary: dict) -> dict:
     """The figures of one run that go into the aggregate JSON and the table."""
     b = summary["bench"]
     t = b["ticks"]
     segs = [{"command": s["command"], "rmse": s.get("rmse"), "mean": s.get("mean"),
-             "samples": s["samples"]} for s in summary["segments"]]
+             "samples": s["samples"], "cut_short": bool(s.get("cut_short", False))}
+            for s in summary["segments"]]
     return {
         "run": name, "robot": summary["robot"], "mode": summary["mode"],
         "sim_time": summary["sim_time"], "wall_time": summary["wall_time"],
@@ -790,6 +810,13 @@ def targets_status(run_: dict, croc: dict) -> dict:
     if croc_ms and unrated:
         out["median_tick_ms"]["met"] = None
         out["median_tick_ms"]["not_rated"] = unrated
+    if run_.get("mode") != "realtime":  # the sim waits for every plan: no clock to keep
+        for key in ("real_time_factor", "control_rate_hz", "deadline_miss_percent"):
+            out[key]["met"] = None
+            out[key]["not_rated"] = "lockstep: the simulator waits for every plan"
+    if any(s.get("cut_short") for s in run_["segments"]):  # --duration ended it early
+        out["tracking_rmse_max"]["met"] = None
+        out["tracking_rmse_max"]["not_rated"] = "the run ended before the profile's last segment"
     if croc_ms:
         out["median_tick_ms"]["crocoddyl_ms_per_iteration"] = croc_ms
         out["median_tick_ms"]["over_crocoddyl_iteration"] = t["median"] / croc_ms
@@ -1045,7 +1072,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     """Command line (see the module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robots", nargs="+", default=list(ROBOTS), help="robots (all three)")
-    ap.add_argument("--duration", type=float, default=None,
+    ap.add_argument("--duration", type=positive_float, default=None,
                     help="sim seconds per run (default: the profile's 10 s)")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT,
                     help="output folder: <out>/<run>/ per run, <out>.json the aggregate")
@@ -1055,15 +1082,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                     help=f"also run {REFERENCE_ROBOT} in lockstep (when --mode realtime)")
     ap.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
                     help="write run.gif per robot (rendered after the run, from its states)")
-    ap.add_argument("--iterations", type=int, default=None,
+    ap.add_argument("--iterations", type=positive_int, default=None,
                     help="ILQR iterations per tick (default: the robot config's mpc.iterations)")
-    ap.add_argument("--repeats", type=int, default=1,
+    ap.add_argument("--repeats", type=positive_int, default=1,
                     help="real-time runs per robot (robots interleaved; GIF of the first only)")
     ap.add_argument("--isolate", action=argparse.BooleanOptionalAction, default=True,
                     help="one subprocess per run (peak RSS per run)")
-    ap.add_argument("--realtime-factor", type=float, default=None,
+    ap.add_argument("--realtime-factor", type=positive_float, default=None,
                     help="diagnostics: sim s per wall s of the real-time runs (default 1)")
-    ap.add_argument("--state-rate", type=float, default=None,
+    ap.add_argument("--state-rate", type=positive_float, default=None,
                     help="diagnostics: sim_node's state publishing rate, Hz (closed_loop's "
                          "real-time default: 250)")
     ap.add_argument("--peer", action="store_true",
@@ -1072,6 +1099,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     args.reference = args.reference and args.mode == "realtime"
+    if not args.worker:  # checked once, before anything is measured
+        refuse_duplicates(ap, args.robots, "--robots")
+        for robot in args.robots:
+            try:
+                load_robot_config(robot)
+            except (FileNotFoundError, ValueError) as exc:
+                ap.error(f"--robots: {exc}")
+        args.out = output_stem(ap, args.out)
+        output_folder(ap, args.out)
     return args
 
 
@@ -1079,7 +1115,7 @@ def plan_runs(args: argparse.Namespace) -> list[tuple[str, str, str, bool]]:
     """(run name, robot, mode, gif) of every measurement: ``--repeats`` rounds over the
     robots (``go2``, then ``go2_r2``, ...), then the lockstep reference."""
     runs = [(robot if k == 1 else f"{robot}_r{k}", robot, args.mode, args.gif and k == 1)
-            for k in range(1, max(1, args.repeats) + 1) for robot in args.robots]
+            for k in range(1, args.repeats + 1) for robot in args.robots]
     if args.reference:
         runs.append((f"{REFERENCE_ROBOT}_lockstep", REFERENCE_ROBOT, "lockstep", False))
     return runs
@@ -1127,11 +1163,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                                    for n, idx in adjacent.items()}
     agg = aggregate(runs, croc, args, {"start": load0, "end": machine_load()})
     agg = bench_ilqr.jsonable(agg)
-    path = args.out.with_suffix(".json")
+    path, png = sibling(args.out, ".json"), sibling(args.out, ".png")
     path.write_text(json.dumps(agg, indent=1, allow_nan=False) + "\n")
-    plot_aggregate(agg, args.out.with_suffix(".png"))
-    sys.stdout.write(table(agg) + f"\nwritten {path}, {args.out.with_suffix('.png')}, "
-                     f"{args.out}/<run>/\n")
+    plot_aggregate(agg, png)
+    sys.stdout.write(table(agg) + f"\nwritten {path}, {png}, {args.out}/<run>/\n")
     return 0
 
 

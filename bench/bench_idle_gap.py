@@ -33,6 +33,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
 import bench_ilqr  # noqa: E402
+from cli_checks import non_negative_float, output_stem, positive_int, sibling  # noqa: E402
 
 from horizon_mpc.config import load_robot_config  # noqa: E402
 from horizon_mpc.mpc import WalkingMpc  # noqa: E402
@@ -85,40 +86,54 @@ def replay(states: list[tuple], gap: float) -> list[float]:
 def main(argv: list[str] | None = None) -> int:
     """Measure both ticks after each gap, write the JSON and the plot, print the table."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--gaps", type=float, nargs="+", default=[0.0, 0.005, 0.02, 0.05],
-                    help="idle seconds before each tick")
-    ap.add_argument("--ticks", type=int, default=150, help="ticks per gap (ours and peer)")
+    ap.add_argument("--gaps", type=non_negative_float, nargs="+",
+                    default=[0.0, 0.005, 0.02, 0.05],
+                    help="idle seconds before each tick (ratios are against the smallest)")
+    ap.add_argument("--ticks", type=positive_int, default=150,
+                    help="ticks per gap (ours and peer)")
     ap.add_argument("--no-peer", action="store_true", help="ours only")
-    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "idle_gap")
+    ap.add_argument("--peer-python", default=None,
+                    help=f"peer interpreter (default ${bench_ilqr.PEER_ENV}, else .venv-peer)")
+    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "idle_gap",
+                    help="output stem: <out>.json and <out>.png")
     args = ap.parse_args(argv)
+    args.out = output_stem(ap, args.out)
     dt = WalkingMpc(ROBOT).settings.dt
     states = record((args.ticks + 1) * dt)
-    python, reason = (None, "--no-peer") if args.no_peer else bench_ilqr.find_peer_python()
+    python, reason = ((None, "--no-peer") if args.no_peer else
+                      bench_ilqr.find_peer_python(args.peer_python))
     rows = []
     for gap in args.gaps:
         ours = replay(states, gap)
         row = {"gap_s": gap, "ours_ms": float(np.median(ours)),
                "ours_p90_ms": float(np.percentile(ours, 90))}
         if python:
-            peer = bench_ilqr.run_peer(python, ticks=args.ticks, repeats=1, max_iter=100,
-                                       profile=False, pace=gap if gap > 0 else 0.0)
-            ticks = peer["paced_ticks"]["tick_ms"] if gap > 0 else peer["ticks"]["tick_ms"]
-            row["crocoddyl_ms"] = float(np.median(ticks))
-            row["ratio"] = row["ours_ms"] / row["crocoddyl_ms"]
+            try:
+                peer = bench_ilqr.run_peer(python, ticks=args.ticks, repeats=1, max_iter=100,
+                                           profile=False, pace=gap if gap > 0 else 0.0)
+            except RuntimeError as exc:  # ours is still measured, the peer's said not run
+                python, reason = None, str(exc)
+                print(f"peer failed, ours only from here: {exc}", flush=True)  # noqa: T201
+            else:
+                ticks = (peer["paced_ticks"]["tick_ms"] if gap > 0
+                         else peer["ticks"]["tick_ms"])
+                row["crocoddyl_ms"] = float(np.median(ticks))
+                row["ratio"] = row["ours_ms"] / row["crocoddyl_ms"]
         rows.append(row)
         print(" | ".join(f"{k} {v:.3f}" for k, v in row.items()), flush=True)  # noqa: T201
-    base = rows[0]
+    base = min(rows, key=lambda r: r["gap_s"])  # the shortest gap (0: back to back)
     for row in rows:
-        row["ours_over_no_gap"] = row["ours_ms"] / base["ours_ms"]
-        if "crocoddyl_ms" in row:
-            row["crocoddyl_over_no_gap"] = row["crocoddyl_ms"] / base["crocoddyl_ms"]
+        row["ours_over_shortest_gap"] = row["ours_ms"] / base["ours_ms"]
+        if "crocoddyl_ms" in row and "crocoddyl_ms" in base:
+            row["crocoddyl_over_shortest_gap"] = row["crocoddyl_ms"] / base["crocoddyl_ms"]
     doc = {"code": bench_ilqr.git_state(), "robot": ROBOT, "ticks": args.ticks,
+           "shortest_gap_s": base["gap_s"],
            "peer": python or f"not run: {reason}", "rows": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    json_path = args.out.with_suffix(".json")
+    json_path, png = sibling(args.out, ".json"), sibling(args.out, ".png")
     json_path.write_text(json.dumps(bench_ilqr.jsonable(doc), indent=1) + "\n")
-    plot(rows, args.out.with_suffix(".png"))
-    print(f"written {json_path}, {args.out.with_suffix('.png')}")  # noqa: T201
+    plot(rows, png)
+    print(f"written {json_path}, {png}")  # noqa: T201
     return 0
 
 

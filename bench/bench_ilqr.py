@@ -57,6 +57,9 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # running from a source checkout without an install
     sys.path.insert(0, str(ROOT))
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # cli_checks, beside this script
+from cli_checks import finite_float, output_folder, positive_int  # noqa: E402
+
 from horizon_mpc.config import load_robot_config  # noqa: E402
 from horizon_mpc.locomotion import MpcSettings, build_walking_problem, make_gait  # noqa: E402
 from horizon_mpc.model import RobotModel  # noqa: E402
@@ -624,16 +627,16 @@ def _option(text: str) -> tuple[str, object]:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Command line (see the module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--ticks", type=int, default=50, help="warm MPC ticks per round (50)")
-    ap.add_argument("--repeats", type=int, default=3,
+    ap.add_argument("--ticks", type=positive_int, default=50, help="warm MPC ticks per round (50)")
+    ap.add_argument("--repeats", type=positive_int, default=3,
                     help="converging solves per round (3)")
-    ap.add_argument("--rounds", type=int, default=3,
+    ap.add_argument("--rounds", type=positive_int, default=3,
                     help="rounds, ours and the peer taking turns (3)")
-    ap.add_argument("--nodes", type=int, nargs="+", default=[40, 56],
+    ap.add_argument("--nodes", type=positive_int, nargs="+", default=[40, 56],
                     help="horizon lengths N of ours (default: 40, the MPC config's, and 56, the "
                          "peer's node count); the first is the headline")
-    ap.add_argument("--max-iter", type=int, default=100, help="iteration limit of a solve")
-    ap.add_argument("--v-forward", type=float, default=V_FORWARD, help="trot velocity, m/s")
+    ap.add_argument("--max-iter", type=positive_int, default=100, help="iteration limit of a solve")
+    ap.add_argument("--v-forward", type=finite_float, default=V_FORWARD, help="trot velocity, m/s")
     ap.add_argument("--out", type=Path, default=RESULTS, help="output directory")
     ap.add_argument("--peer-python", default=None,
                     help=f"peer interpreter (default ${PEER_ENV}, else .venv-peer)")
@@ -643,7 +646,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--no-codegen", action="store_true",
                     help="CasADi VM instead of compiled node functions (tests only)")
     ap.add_argument("--no-plot", action="store_true", help="skip ilqr.png")
-    return ap.parse_args(argv)
+    args = ap.parse_args(argv)
+    args.out = output_folder(ap, args.out)  # checked before the minutes of measuring
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -98,8 +98,18 @@ def test_a_tiny_lockstep_run_gives_finite_figures(tmp_path):
     assert all(_finite(v) for v in on_disk["bench"]["wall_s_per_sim_s"].values())
     assert on_disk["falls"]["count"] == 0
 
-    croc = bench.crocoddyl_reference()
-    assert croc["same_run"] is False
+    # an earlier bench_ilqr.py run's figures (written here: the repository's ilqr.json is
+    # whatever the last run wrote, with or without the peer)
+    ilqr_json = tmp_path / "ilqr.json"
+    ilqr_json.write_text(json.dumps({
+        "code": {"commit": "0123456789"}, "machine": {"loadavg_start": [0.1, 0.1, 0.1]},
+        "peer": {"available": True, "problem": {"nodes": 56},
+                 "converging": {"ms_per_iteration": {"median": 9.0},
+                                "cpu_ms_per_iteration": {"median": 8.9}},
+                 "ticks": {"tick_ms": {"median": 10.0}}}}))
+    croc = bench.crocoddyl_reference(ilqr_json=ilqr_json)
+    assert croc["same_run"] is False and croc["ms_per_iteration"] == 9.0
+    assert "NOT this run" in croc["source"] and "0123456" in croc["source"]
     agg = bench.bench_ilqr.jsonable(bench.aggregate({"go2": summary}, croc, args, {}))
     path = tmp_path / "closed_loop.json"
     path.write_text(json.dumps(agg, allow_nan=False))
@@ -111,10 +121,20 @@ def test_a_tiny_lockstep_run_gives_finite_figures(tmp_path):
     assert _finite(run["real_time_factor"]) and run["real_time_factor"] > 0
     assert _finite(run["tracking_rmse_pooled"]["vx"])
     assert run["segments"][1]["samples"] > 0 and run["segments"][2]["rmse"] is None
-    assert "over_crocoddyl_iteration" in agg["status"]["go2"]["median_tick_ms"]
+    tick_status = agg["status"]["go2"]["median_tick_ms"]
+    assert tick_status["over_crocoddyl_iteration"] == pytest.approx(
+        run["tick_ms"]["median"] / 9.0)
+    assert tick_status["met"] is None  # an earlier run's peer: context, not rated
     assert set(agg["status"]["go2"]) >= {"median_tick_ms", "p99_over_median", "rss_mb",
                                         "tracking_rmse_max", "real_time_factor",
                                         "deadline_miss_percent"}
+    status = agg["status"]["go2"]
+    for key in ("real_time_factor", "control_rate_hz", "deadline_miss_percent"):
+        # lockstep has no clock to keep: its real-time targets are not rated
+        assert status[key]["met"] is None and "lockstep" in status[key]["not_rated"], key
+    # the tiny run stops inside the profile: its tracking is not rated against the target
+    assert status["tracking_rmse_max"]["met"] is None
+    assert "ended before" in status["tracking_rmse_max"]["not_rated"]
     text = bench.table(agg)
     assert "go2" in text and "Crocoddyl" in text
     bench.plot_aggregate(agg, tmp_path / "closed_loop.png")
@@ -209,3 +229,32 @@ def test_the_paced_peer_tick_is_context_beside_the_target_not_the_target():
     assert m["over_crocoddyl_iteration"] == pytest.approx(0.5) and m["met"] is False
     croc["rounds"][1]["paced_tick_ms"] = None  # a round without paced ticks: no ratio
     assert "over_crocoddyl_paced_tick" not in bench.targets_status(run, croc)["median_tick_ms"]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--robots", "go3"], "no robot config 'go3'"),
+    (["--robots", "go2", "go2"], "go2 given more than once"),
+    (["--duration", "0"], "--duration: '0' is not a finite number > 0"),
+    (["--duration", "nan"], "--duration: 'nan' is not a finite number > 0"),
+    (["--iterations", "0"], "--iterations: '0' is not an integer >= 1"),
+    (["--repeats", "-2"], "--repeats: '-2' is not an integer >= 1"),
+    (["--realtime-factor", "0"], "--realtime-factor: '0' is not a finite number > 0"),
+    (["--state-rate", "-250"], "--state-rate: '-250' is not a finite number > 0"),
+])
+def test_bad_arguments_are_refused_before_anything_is_measured(argv, message, capsys):
+    """Each of these crashed after the whole measurement (or ran something else: --repeats
+    -2 ran one round and recorded -2)."""
+    with pytest.raises(SystemExit) as exc:
+        bench.parse_args(argv)
+    assert exc.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_an_out_that_is_a_file_is_refused_and_a_dotted_stem_keeps_its_name(tmp_path, capsys):
+    file = tmp_path / "f"
+    file.write_text("")
+    with pytest.raises(SystemExit):
+        bench.parse_args(["--out", str(file)])
+    assert "is not a folder" in capsys.readouterr().err
+    args = bench.parse_args(["--out", str(tmp_path / "a.v2")])
+    assert bench.sibling(args.out, ".json") == tmp_path / "a.v2.json"
+    assert bench.parse_args(["--out", "."]).out == Path.cwd()  # a name of its own

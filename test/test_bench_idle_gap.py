@@ -10,6 +10,8 @@ import math
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -25,16 +27,30 @@ def _load_bench():
 def test_a_tiny_run_times_our_ticks_after_each_gap(tmp_path):
     bench = _load_bench()
     out = tmp_path / "idle"
-    assert bench.main(["--gaps", "0", "0.002", "--ticks", "3", "--no-peer", "--out",
+    # the gaps in any order: the ratios are against the shortest (the first row was taken)
+    assert bench.main(["--gaps", "0.002", "0", "--ticks", "3", "--no-peer", "--out",
                        str(out)]) == 0
     doc = json.loads(out.with_suffix(".json").read_text())
     assert doc["robot"] == "go2" and doc["peer"].startswith("not run")
-    assert [r["gap_s"] for r in doc["rows"]] == [0.0, 0.002]
+    assert [r["gap_s"] for r in doc["rows"]] == [0.002, 0.0] and doc["shortest_gap_s"] == 0.0
     for row in doc["rows"]:
         assert math.isfinite(row["ours_ms"]) and row["ours_ms"] > 0
         assert row["ours_p90_ms"] >= row["ours_ms"] and "crocoddyl_ms" not in row
-    assert doc["rows"][0]["ours_over_no_gap"] == 1.0
+    assert doc["rows"][1]["ours_over_shortest_gap"] == 1.0
+    assert doc["rows"][0]["ours_over_shortest_gap"] == pytest.approx(
+        doc["rows"][0]["ours_ms"] / doc["rows"][1]["ours_ms"])
     assert out.with_suffix(".png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--ticks", "0"], "--ticks: '0' is not an integer >= 1"),
+    (["--gaps", "-0.01"], "--gaps: '-0.01' is not a finite number >= 0"),
+])
+def test_bad_arguments_are_refused_before_anything_runs(argv, message, capsys):
+    bench = _load_bench()
+    with pytest.raises(SystemExit) as exc:
+        bench.main([*argv, "--no-peer"])
+    assert exc.value.code == 2 and message in capsys.readouterr().err
 
 
 def test_the_replay_sleeps_the_gap_before_each_tick(monkeypatch):

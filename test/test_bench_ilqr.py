@@ -95,3 +95,25 @@ def test_the_peer_paces_its_warm_ticks_when_asked():
                                                profile=False)
     pooled = bench.summarise_peer([out, out])["paced_ticks"]
     assert pooled["n"] == 6 and _finite_positive(pooled["tick_ms"]["median"])
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--repeats", "0"], "--repeats: '0' is not an integer >= 1"),
+    (["--rounds", "0"], "--rounds: '0' is not an integer >= 1"),
+    (["--ticks", "-3"], "--ticks: '-3' is not an integer >= 1"),
+    (["--nodes", "24", "0"], "--nodes: '0' is not an integer >= 1"),
+    (["--v-forward", "nan"], "--v-forward: 'nan' is not a finite number"),
+])
+def test_bad_arguments_are_refused_before_anything_is_measured(argv, message, capsys):
+    """--repeats 0 crashed after the warm ticks were measured, --ticks 0 printed a nan tick
+    and exited 0, --v-forward nan solved a problem of NaN parameters."""
+    with pytest.raises(SystemExit) as exc:
+        bench.parse_args(argv)
+    assert exc.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_an_out_that_is_a_file_is_refused(tmp_path, capsys):
+    (tmp_path / "f").write_text("")
+    with pytest.raises(SystemExit):
+        bench.parse_args(["--out", str(tmp_path / "f")])
+    assert "is not a folder" in capsys.readouterr().err
