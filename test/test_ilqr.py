@@ -712,3 +712,36 @@ def test_a_resolve_after_an_infeasible_solve_starts_without_its_diverged_multipl
     fresh = make_solver("ilqr", pendulum_swing_up(5.0))
     assert fresh.solve()
     assert solver.stats.cost == pytest.approx(fresh.stats.cost, rel=1e-6)
+
+
+def test_a_re_solve_after_moving_a_state_bound_parameter_converges_at_once():
+    """A converged re-solve of an unchanged problem ended at max_iter (an extender's audit):
+    a penalty raised to rho_max by the solve before sat on rows inactive at the warm start,
+    a kink the Gauss-Newton model does not see, and every step was rejected. Rows inactive
+    at the start of a plain re-solve get fresh multipliers and penalties."""
+    N = 20
+    prb = Problem(N)
+    p = prb.create_state_variable("p", 1)
+    v = prb.create_state_variable("v", 1)
+    u = prb.create_input_variable("u", 1)
+    wall = prb.create_parameter("wall", 1)
+    prb.set_dynamics(cs.vertcat(v, u))
+    prb.set_dt(0.05)
+    prb.create_cost("track", p - 1.0, weight=10.0)
+    prb.create_cost("effort", u, weight=0.01)
+    prb.create_constraint("wall", p - wall, bounds=(-np.inf, 0.0))
+    wall.assign(0.5)
+    p.set_bounds(0, 0, nodes=0)
+    v.set_bounds(0, 0, nodes=0)
+    solver = make_solver("ilqr", prb)
+    for change in (None, lambda: wall.assign(0.4), None,
+                   lambda: wall.assign(0.45, nodes=range(10, N + 1)), None):
+        if change is not None:
+            change()
+        solver.solve()
+        assert solver.stats.success, solver.stats.status
+    assert solver.stats.iterations <= 2  # the last: nothing changed since the solve before
+    cost = solver.stats.cost
+    reference = make_solver("ipopt", prb)
+    reference.solve()
+    assert cost == pytest.approx(reference.stats.cost, rel=1e-5)

@@ -281,6 +281,29 @@ class AugmentedLagrangian:
             if a.shape[0] > 1:
                 a[:-1] = a[1:]
 
+    def relax_idle_penalties(self, c: np.ndarray) -> bool:
+        """Fresh multipliers and penalties (0, ``rho0``) for the inequality rows that are
+        inactive at ``c``: ``lam + rho (c - ub) <= 0`` on each bounded side (``'lagrangian'``
+        mode; returns whether any changed). The term of such a row is a constant there, so
+        the merit moves by that constant only, but a penalty a past solve raised to
+        ``rho_max`` puts a kink of that curvature a hair from ``c``, which the Gauss-Newton
+        model (weight 0 while inactive) does not see: every step toward the bound was
+        rejected, the regularisation grew, and a re-solve of a converged problem ended at
+        ``max_iter``."""
+        if self.barrier:
+            return False
+        with np.errstate(invalid="ignore"):  # inf bounds: the side's test is False
+            up = self.has_up & (self.lam_up + self.rho * (c - self.ub) > 0.0)
+            lo = self.has_lo & (self.lam_lo + self.rho * (self.lb - c) > 0.0)
+        inactive = (self.has_up | self.has_lo) & ~up & ~lo
+        inactive &= (self.rho != self.rho0) | (self.lam_up != 0.0) | (self.lam_lo != 0.0)
+        if not inactive.any():
+            return False
+        self.lam_up[inactive] = self.lam_lo[inactive] = 0.0
+        self.rho[inactive] = self.rho0
+        self._last_violation[inactive] = np.inf
+        return True
+
     def reset_penalties(self) -> None:
         """Penalties back to ``rho0`` (multipliers kept)."""
         self.rho[:] = self.rho0

@@ -737,9 +737,17 @@ class IlqrSolver(Solver):
             # change, a cart-pole with them reset ended at 1.1e-6 violation, max_iter)
             self._al.reset_penalties()
             self._alN.reset_penalties()
+        relax = not self._shifted and not self.opts["rti"]
         self._shifted = False
         self._gather()
-        return self._evaluate(self.X, self.U)
+        ev = self._evaluate(self.X, self.U)
+        if relax and ev is not None:
+            # a plain re-solve keeps the penalties of the rows it needs (above), not those of
+            # rows idle at the warm start (AugmentedLagrangian.relax_idle_penalties)
+            if (self._al.relax_idle_penalties(ev["c"])
+                    | self._alN.relax_idle_penalties(ev["cN"])):
+                ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
+        return ev
 
     def _singles_per_node(self) -> np.ndarray:
         """The single variables once per stage node, (ns, N): the mapped stage functions
