@@ -2409,3 +2409,21 @@ def test_a_publisher_of_another_type_on_an_input_is_named(context, walking_mpc, 
         teleop.destroy_node()
         rclpy.try_shutdown(context=other)
         node.destroy_node()
+
+
+def test_a_weight_whose_default_is_zero_is_not_compared_with_it(monkeypatch):
+    """A term switched off by default (the natural way to add one) has no walked scale: its
+    weight 5 was 'up to 5e+300x its library default' at every start (an extender's audit)."""
+    from dataclasses import dataclass
+
+    from horizon_mpc.locomotion.settings import Weights
+    from horizon_mpc.nodes import mpc_parameters
+
+    @dataclass
+    class WithAnOffTerm(Weights):
+        base_yaw: float = 0.0
+
+    monkeypatch.setattr(mpc_parameters, "Weights", WithAnOffTerm)
+    assert mpc_parameters.weight_warnings(WithAnOffTerm(base_yaw=5.0)) == []
+    heavy = mpc_parameters.weight_warnings(WithAnOffTerm(posture=3e3))  # still compared
+    assert len(heavy) == 1 and heavy[0].startswith("w_posture 3000 is up to 1e+04x")

@@ -150,13 +150,19 @@ def limit_warnings(limits: list[float], config_limits: list[float]) -> list[str]
 
 def weight_warnings(weights: Weights, names: list[str] | None = None) -> list[str]:
     """The weights (of ``names``, default all; without the ``w_`` prefix) more than
-    WALKED_WEIGHT_RATIO times their library defaults (empty when none is)."""
+    WALKED_WEIGHT_RATIO times their library defaults (empty when none is). Entries whose
+    default is 0 (a term off by default) have no walked scale and are not compared (a
+    new term's weight 5 was called 5e+300x its default)."""
     defaults = Weights()
     out = []
     for n in WEIGHT_FIELDS if names is None else names:
         value = np.atleast_1d(np.asarray(getattr(weights, n), dtype=float))
         default = np.atleast_1d(np.asarray(getattr(defaults, n), dtype=float))
-        ratio = np.max(np.abs(value) / np.maximum(np.abs(default), 1e-300))
+        value, default = np.broadcast_arrays(value, default)
+        on = default != 0.0
+        if not on.any():
+            continue
+        ratio = np.max(np.abs(value[on]) / np.abs(default[on]))
         if ratio > WALKED_WEIGHT_RATIO:
             shown = f"{float(value[0]):g}" if value.size == 1 else str(value.tolist())
             out.append(f"w_{n} {shown} is up to {ratio:.3g}x its library default: the go2 "
