@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-__all__ = ["RobotConfig", "SimGains", "check_settings", "config_dirs", "field_default",
-           "find_config_file", "finite_number", "load_robot_config", "merged",
+__all__ = ["RobotConfig", "SimGains", "check_settings", "config_dirs", "did_you_mean",
+           "field_default", "find_config_file", "finite_number", "load_robot_config", "merged",
            "nearest_name", "numeric_type", "parse_yaml", "read_yaml"]
 
 log = logging.getLogger(__name__)
@@ -330,6 +330,13 @@ def nearest_name(name: str, known: list[str]) -> str | None:
     else None."""
     low = name.lower()
     return next((n for n in known if _edits(low, n.lower()) <= max(1, len(n) // 4)), None)
+
+
+def did_you_mean(name: object, known: list[str]) -> str:
+    """`` (did you mean 'x'?)`` for the :func:`nearest_name` ``x`` of ``name`` in
+    ``known``, else an empty text: the tail of an error naming an unknown name."""
+    near = nearest_name(name, known) if isinstance(name, str) else None
+    return f" (did you mean {near!r}?)" if near is not None else ""
 
 
 def _urdf_path(path: Path, value: Any) -> str | None:

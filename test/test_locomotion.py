@@ -950,3 +950,27 @@ def test_the_command_ramps_along_a_line_with_combined_accelerations(walking_mpc)
     mpc._ramp_command(np.array([0.3, 0.0, 0.0]), 0.02)
     assert mpc.cmd.tolist() == pytest.approx([0.02, 0.0, 0.0])  # one axis: at its limit
     mpc.cmd[:] = 0.0
+
+
+def test_misspelt_gait_weight_and_frame_names_get_the_nearest_known_one():
+    """Config keys had nearest-name hints; gait names, weight keys and frame names listed
+    everything and left the reader to spot the typo (an extender's audit)."""
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.locomotion.gaits import make_gait
+    from horizon_mpc.locomotion.settings import GaitSettings, MpcSettings
+    from horizon_mpc.model import RobotModel
+    from horizon_mpc.model.robot_model import UnknownNameError
+
+    with pytest.raises(ValueError, match=r"unknown gait 'trott' \(did you mean 'trot'\?\)"):
+        make_gait("trott")
+    with pytest.raises(ValueError, match=r"got 'Walk' \(did you mean 'walk'\?\)"):
+        GaitSettings(name="Walk")
+    with pytest.raises(ValueError, match=r"\['base_yaww' \(did you mean 'base_yaw'\?\)\] in "
+                                         r"'mpc.weights'"):
+        MpcSettings.from_dict({"weights": {"base_yaww": 1.0}})
+    with pytest.raises(ValueError, match=r"unknown gait 'gallop'; gaits are"):  # no near one
+        make_gait("gallop")
+    model = RobotModel.from_config(load_robot_config("go2"))
+    with pytest.raises(UnknownNameError, match=r"unknown frame 'FL_fot' \(did you mean "
+                                               r"'FL_foot'\?\)"):
+        model.frame_id("FL_fot")

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from horizon_mpc.config import did_you_mean
+
 __all__ = ["EXPERIMENTAL_GAITS", "GAITS", "ContactSchedule", "Gait", "make_gait",
            "speed_scale", "swing_height_profile"]
 
@@ -131,7 +133,8 @@ def make_gait(name: str, step_duration: float = 0.3, step_height: float = 0.08,
             ``stand``, which ignores it), fewer than one foot.
     """
     if not isinstance(name, str) or name not in GAITS:
-        raise ValueError(f"unknown gait {name!r}; gaits are: {', '.join(GAITS)}")
+        raise ValueError(f"unknown gait {name!r}{did_you_mean(name, list(GAITS))}; gaits are: "
+                         f"{', '.join(GAITS)}")
     for what, value in (("step_duration", step_duration), ("step_height", step_height),
                         ("duty factor", duty_factor)):
         if value is not None and (isinstance(value, bool)

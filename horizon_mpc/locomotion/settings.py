@@ -15,6 +15,7 @@ import numpy as np
 from horizon_mpc.config import (
     RobotConfig,
     check_settings,
+    did_you_mean,
     field_default,
     finite_number,
     merged,
@@ -70,7 +71,8 @@ class GaitSettings:
         check_settings(self, positive=("step_duration",), non_negative=("step_height",),
                        prefix="mpc.gait.")
         if not isinstance(self.name, str) or self.name not in GAITS:
-            raise ValueError(f"'mpc.gait.name' must be one of {list(GAITS)}, got {self.name!r}")
+            raise ValueError(f"'mpc.gait.name' must be one of {list(GAITS)}, got {self.name!r}"
+                             f"{did_you_mean(self.name, list(GAITS))}")
         _within("mpc.gait.step_duration", self.step_duration, STEP_DURATION_RANGE)
         _within("mpc.gait.step_height", self.step_height, STEP_HEIGHT_RANGE)
         if self.duty_factor is not None and not (
@@ -257,8 +259,9 @@ def _check(data: dict, cls: type, where: str) -> None:
     names = {f.name for f in fields(cls)}
     unknown = set(data) - names
     if unknown:
-        raise ValueError(f"unknown key(s) {sorted(map(str, unknown))} in '{where}'; known: "
-                         f"{sorted(names)}")
+        shown = ", ".join(f"{str(k)!r}{did_you_mean(k, sorted(names))}"
+                          for k in sorted(unknown, key=str))
+        raise ValueError(f"unknown key(s) [{shown}] in '{where}'; known: {sorted(names)}")
 
 
 def _flat(value: Any) -> bool:

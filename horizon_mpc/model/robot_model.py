@@ -24,6 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from horizon_mpc import codegen
+from horizon_mpc.config import did_you_mean
 from horizon_mpc.model import kinematics, liegroup
 from horizon_mpc.model.functions import SymbolicFunctions
 from horizon_mpc.model.joints import joint_specs
@@ -272,7 +273,8 @@ class RobotModel(SymbolicFunctions):
         index = self._frame_index.get(frame) if isinstance(frame, str) else None
         if index is None:
             raise UnknownNameError(
-                f"unknown frame {frame!r} in {self.name}; frames are: {', '.join(self.frame_names)}"
+                f"unknown frame {frame!r}{did_you_mean(frame, list(self.frame_names))} in "
+                f"{self.name}; frames are: {', '.join(self.frame_names)}"
             )
         return index
 
