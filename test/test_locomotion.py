@@ -974,3 +974,31 @@ def test_misspelt_gait_weight_and_frame_names_get_the_nearest_known_one():
     with pytest.raises(UnknownNameError, match=r"unknown frame 'FL_fot' \(did you mean "
                                                r"'FL_foot'\?\)"):
         model.frame_id("FL_fot")
+
+
+def test_feet_listed_out_of_the_gait_order_are_refused_naming_the_order_that_is():
+    """The gaits' offsets are for front left, front right, hind left, hind right: go2's feet
+    listed FL, RR, FR, RL made its trot a pace, and it fell, without a word (an extender's
+    audit)."""
+    import dataclasses
+
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.locomotion import build_walking_problem
+    from horizon_mpc.locomotion.gaits import feet_order_error
+    from horizon_mpc.model import RobotModel
+
+    square = [[0.2, 0.15], [0.2, -0.15], [-0.2, 0.15], [-0.2, -0.15]]
+    assert feet_order_error(["a", "b", "c", "d"], square) is None
+    text = feet_order_error(["a", "d", "b", "c"], [square[i] for i in (0, 3, 1, 2)])
+    assert "not in the gait order front left, front right, hind left, hind right" in text
+    assert text.endswith("list them as ['a', 'b', 'c', 'd']")
+    # no side to tell (a foot on the centre line), or not four feet: not checked
+    assert feet_order_error(list("abcd"), [[0.2, 0.0], *square[1:]]) is None
+    assert feet_order_error(list("ab"), square[:2]) is None
+
+    cfg = load_robot_config("go2")
+    model = RobotModel.from_config(cfg)
+    wrong = dataclasses.replace(cfg, feet=["FL_foot", "RR_foot", "FR_foot", "RL_foot"])
+    with pytest.raises(ValueError, match=r"list them as \['FL_foot', 'FR_foot', 'RL_foot', "
+                                         r"'RR_foot'\]"):
+        build_walking_problem(model, wrong)

@@ -17,8 +17,13 @@ import numpy as np
 
 from horizon_mpc.config import did_you_mean
 
-__all__ = ["EXPERIMENTAL_GAITS", "GAITS", "ContactSchedule", "Gait", "make_gait",
-           "speed_scale", "swing_height_profile"]
+__all__ = ["EXPERIMENTAL_GAITS", "GAITS", "ContactSchedule", "Gait", "feet_order_error",
+           "make_gait", "speed_scale", "swing_height_profile"]
+
+#: the foot each gait offset is for, in order (front/hind, left/right)
+FOOT_SLOTS = ("front left", "front right", "hind left", "hind right")
+# m: standing feet closer than this to the feet's centre along x or y have no side to check
+SIDE_MARGIN = 0.01
 
 
 @dataclass(frozen=True)
@@ -169,3 +174,26 @@ def speed_scale(gait: Gait, reference: Gait) -> float:
         return 1.0
     stance = gait.duty_factor * gait.period
     return min(1.0, reference.duty_factor * reference.period / stance)
+
+
+def feet_order_error(feet: list[str], xy: np.ndarray) -> str | None:
+    """Why four ``feet`` standing at ``xy`` (n_feet, 2; base frame, x forward, y left) are
+    not in the gait order of :data:`FOOT_SLOTS`, naming the order that is; None when they
+    are, or when the order cannot be told (not four feet, a foot within ``SIDE_MARGIN`` of
+    the feet's centre along x or y). The offsets of every gait are given in that order: a
+    config listing go2's feet as FL, RR, FR, RL made its trot a pace, and it fell."""
+    xy = np.asarray(xy, dtype=float)
+    if len(feet) != 4 or xy.shape != (4, 2):
+        return None
+    d = xy - xy.mean(axis=0)
+    if np.any(np.abs(d) < SIDE_MARGIN):
+        return None
+    slots = [2 * int(dx < 0) + int(dy < 0) for dx, dy in d]  # index into FOOT_SLOTS
+    if slots == [0, 1, 2, 3]:
+        return None
+    where = ", ".join(f"{foot} {FOOT_SLOTS[k]}" for foot, k in zip(feet, slots, strict=True))
+    text = (f"feet {list(feet)} are not in the gait order {', '.join(FOOT_SLOTS)} (standing: "
+            f"{where}); the gaits' offsets are given in that order")
+    if sorted(slots) == [0, 1, 2, 3]:
+        text += f": list them as {[feet[slots.index(k)] for k in range(4)]}"
+    return text

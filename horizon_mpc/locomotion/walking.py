@@ -19,6 +19,7 @@ from horizon_mpc.locomotion.formulation import (
     base_rotation,
     floating_base_double_integrator,
 )
+from horizon_mpc.locomotion.gaits import feet_order_error
 from horizon_mpc.locomotion.settings import MpcSettings, Weights
 from horizon_mpc.model import RobotModel
 from horizon_mpc.posture import standing_configuration
@@ -87,6 +88,12 @@ def build_walking_problem(model: RobotModel, cfg: RobotConfig,
     st = settings or MpcSettings.from_config(cfg)
     feet = list(cfg.feet)
     _, q_nom = standing_configuration(cfg, model.pin_model)  # the model's own joints
+    q_base = q_nom.copy()
+    q_base[:7] = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]  # the base frame at the origin
+    order = feet_order_error(feet, [np.asarray(model.fk(foot)(q_base)[0]).ravel()[:2]
+                                    for foot in feet])
+    if order is not None:
+        raise ValueError(f"{cfg.source or cfg.name}: {order}")
     h_nom = float(q_nom[2]) if st.base_height is None else float(st.base_height)
     mu = cfg.friction if st.friction is None else st.friction
 
