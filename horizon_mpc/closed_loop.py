@@ -617,7 +617,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from horizon_mpc.closed_loop_report import summarise, write_report
 
     ap = argparse.ArgumentParser(prog=_prog(), description=__doc__.splitlines()[0])
-    ap.add_argument("--robot", default="go2", help="robot config name (default go2)")
+    ap.add_argument("--robot", default="go2",
+                    help="robot config name or YAML path (default go2)")
     ap.add_argument("--profile", default=DEFAULT_PROFILE,
                     help="command profile: a YAML file, or the name of one in "
                          "config/commands (default: 'default')")

@@ -1002,3 +1002,35 @@ def test_feet_listed_out_of_the_gait_order_are_refused_naming_the_order_that_is(
     with pytest.raises(ValueError, match=r"list them as \['FL_foot', 'FR_foot', 'RL_foot', "
                                          r"'RR_foot'\]"):
         build_walking_problem(model, wrong)
+
+
+def test_every_weight_reaches_a_cost_of_the_walking_problem():
+    """A Weights field that set_weights forgets is a config key and a live w_* parameter
+    that do nothing (doc/locomotion.md, Extending it): each field, changed alone, changes
+    the weight of some cost term."""
+    import dataclasses
+
+    from horizon_mpc.config import load_robot_config
+    from horizon_mpc.locomotion import build_walking_problem
+    from horizon_mpc.locomotion.settings import Weights
+    from horizon_mpc.model import RobotModel
+
+    cfg = load_robot_config("go2")
+    wp = build_walking_problem(RobotModel.from_config(cfg), cfg)
+    terms = {**wp.prb.costs, **{f"clearance {k}": t for k, t in wp.contacts.clearance.items()
+                                if hasattr(t, "set_weight")}}
+
+    def snapshot() -> dict:
+        return {name: np.array(t.weight, copy=True) for name, t in terms.items()}
+
+    base = Weights()
+    wp.set_weights(base)
+    before = snapshot()
+    for f in dataclasses.fields(Weights):
+        value = getattr(base, f.name)
+        changed = ([2.0 * x + 1.0 for x in value] if isinstance(value, list)
+                   else 2.0 * value + 1.0)
+        wp.set_weights(dataclasses.replace(base, **{f.name: changed}))
+        after = snapshot()
+        assert any(not np.array_equal(before[n], after[n]) for n in terms), f.name
+        wp.set_weights(base)

@@ -47,7 +47,7 @@ LIVE_LIMITS = ("max_vx", "max_vy", "max_wz")
 # declared by MpcNode itself, before the settings they choose are read: name, default,
 # description (all read-only)
 MODEL_PARAMETER_DECLARATIONS = (
-    ("robot", "go2", "robot config name (config/<robot>.yaml)"),
+    ("robot", "go2", "robot config name (config/<robot>.yaml) or YAML path"),
     ("config", "", "path of a robot config YAML (overrides 'robot')"),
     ("urdf_path", "", "URDF file of the robot model (overrides the config's URDF; the config "
      "still gives feet, posture, gains, weights)"),

@@ -97,7 +97,7 @@ def mpc_period(cfg: RobotConfig) -> float:
 #: sim_node's parameters: (name, default, description[, range]); a :class:`FromConfig`
 #: default is the robot config's value
 SIM_PARAMETERS = [
-    ("robot", "go2", "robot config name (config/<robot>.yaml)"),
+    ("robot", "go2", "robot config name (config/<robot>.yaml) or YAML path"),
     ("config", "", "path of a robot config YAML (overrides 'robot')"),
     ("urdf_path", "", "URDF to simulate instead of the config's"),
     ("robot_description", "", "URDF XML text to simulate, as robot_state_publisher's "
