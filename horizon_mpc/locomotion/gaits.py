@@ -192,8 +192,9 @@ def feet_order_error(feet: list[str], xy: np.ndarray) -> str | None:
     if slots == [0, 1, 2, 3]:
         return None
     where = ", ".join(f"{foot} {FOOT_SLOTS[k]}" for foot, k in zip(feet, slots, strict=True))
-    text = (f"feet {list(feet)} are not in the gait order {', '.join(FOOT_SLOTS)} (standing: "
-            f"{where}); the gaits' offsets are given in that order")
+    text = (f"feet {list(feet)} are not in the gait order {', '.join(FOOT_SLOTS)} (standing, "
+            f"in the base frame, x forward and y left as REP 103 has it: {where}); the gaits' "
+            "offsets are given in that order")
     if sorted(slots) == [0, 1, 2, 3]:
         text += f": list them as {[feet[slots.index(k)] for k in range(4)]}"
     return text
