@@ -712,7 +712,11 @@ class IlqrSolver(Solver):
         changed = self._al.update(ev["c"], rho_factor, self.opts["rho_max"])
         changed |= self._alN.update(ev["cN"], rho_factor, self.opts["rho_max"])
         if changed:
-            ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
+            self._refresh_al(ev)
+
+    def _refresh_al(self, ev: dict[str, Any]) -> None:
+        """``ev['al']`` again after the rows' multipliers or penalties changed."""
+        ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
 
     def _begin_call(self) -> dict[str, Any] | None:
         """What :meth:`solve` and :meth:`prepare` start with: fresh timings and merit
@@ -746,7 +750,7 @@ class IlqrSolver(Solver):
             # rows idle at the warm start (AugmentedLagrangian.relax_idle_penalties)
             if (self._al.relax_idle_penalties(ev["c"])
                     | self._alN.relax_idle_penalties(ev["cN"])):
-                ev["al"] = self._al.value(ev["c"]) + self._alN.value(ev["cN"])
+                self._refresh_al(ev)
         return ev
 
     def _singles_per_node(self) -> np.ndarray:
